@@ -1,0 +1,1 @@
+"""fov_marl.control."""
