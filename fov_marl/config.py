@@ -70,9 +70,7 @@ def _check_range(
     """Raise :class:`ConfigError` unless ``value`` is finite and inside the interval."""
     lo_b = "(" if lo_open else "["
     hi_b = ")" if hi_open else "]"
-    allowed = (
-        f"{lo_b}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{hi_b}"
-    )
+    allowed = f"{lo_b}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{hi_b}"
     try:
         v = float(value)
     except (TypeError, ValueError):

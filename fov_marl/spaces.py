@@ -49,8 +49,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fov_marl.config import ScenarioConfig
-
 __all__ = [
     "SLOT_SIZE",
     "CUE_SIZE",
@@ -175,5 +173,7 @@ def velocity_to_action(v_body: np.ndarray, omega: np.ndarray, v_max: float, omeg
         ``(..., 3)`` float32 actions in ``[-1, 1]`` (clipped against round-off).
     """
     v_body = np.asarray(v_body, dtype=np.float64)
-    a = np.concatenate([v_body / v_max, (np.asarray(omega, dtype=np.float64) / omega_max)[..., None]], -1)
+    a = np.concatenate(
+        [v_body / v_max, (np.asarray(omega, dtype=np.float64) / omega_max)[..., None]], -1
+    )
     return np.clip(a, -1.0, 1.0).astype(np.float32)

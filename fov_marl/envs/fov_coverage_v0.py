@@ -1,0 +1,185 @@
+"""fov_coverage_v0: coverage of a Gaussian density by robots that see each other only
+through a limited-FoV camera and never communicate (paper Section VII-A/B/C).
+
+============================  ==============================================================
+Import                        ``from fov_marl.envs import fov_coverage_v0``
+API                           PettingZoo ``ParallelEnv`` (``parallel_env``), AEC (``env``)
+Agents                        ``robot_0 … robot_{N−1}``, N = ``n_agents`` (default 6)
+Action space                  ``Box(-1, 1, (3,), float32)`` per agent
+Observation space             ``Box(low, high, (5 (N − 1) + 7,), float32)`` per agent
+State space                   ``Box(…, (4 N + 3,), float32)``
+Episode                       ``max_cycles`` steps of ``dt_s`` (default 1000 × 0.2 s = 200 s)
+============================  ==============================================================
+
+Usage::
+
+    from fov_marl.envs import fov_coverage_v0
+    env = fov_coverage_v0.parallel_env(n_agents=6, fov_deg=120.0, render_mode=None)
+    obs, infos = env.reset(seed=0)
+    while env.agents:
+        actions = {a: env.action_space(a).sample() for a in env.agents}
+        obs, rewards, terminations, truncations, infos = env.step(actions)
+
+Every keyword of ``parallel_env``/``env`` (except ``render_mode``) is a field of
+:class:`fov_marl.config.ScenarioConfig` with the paper's value as default; an unknown
+keyword or an out-of-range value raises ``ValueError`` naming the field and its range.
+
+Arena and robots
+----------------
+The arena is the square ``[0, L]²`` (L = ``arena_size_m`` = 40 m), obstacle-free.
+Robot i has world pose ``ʷχ_i = [x m, y m, yaw rad]`` and kinematics
+``ⁱχ̇_i = ⁱu_i = [vx, vy, ω]`` in its body frame Σ_i, integrated exactly over
+``dt_s`` (constant input, rotating heading). After each step positions are
+projected onto ``[r, L − r]²`` (r = ``robot_radius_m``), so a robot pushing into a
+wall slides along it. Robots pass through each other: collisions are counted, not
+resolved physically.
+
+Action space
+------------
+======  ==============  =======================================================
+index   meaning         mapping
+======  ==============  =======================================================
+0       vx (Σ_i)        ``a₀ · v_max_mps`` (m/s)
+1       vy (Σ_i)        ``a₁ · v_max_mps`` (m/s)
+2       ω               ``a₂ · omega_max_radps`` (rad/s)
+======  ==============  =======================================================
+
+Values outside ``[-1, 1]`` are clipped to it. The planar speed is then limited to
+``v_max_mps``: ``(vx, vy)`` is shrunk to norm ``v_max`` when longer (diagonal
+commands). NaN or inf, a shape other than ``(3,)``, or an action for an unknown
+agent raise ``ValueError`` naming the agent; every live agent needs an action.
+The mapping is :func:`fov_marl.spaces.action_to_velocity`.
+
+Observation space
+-----------------
+What robot i's camera reports plus its own mission cue; never ground truth about
+neighbours. One slot of 5 entries per other robot ID, in ascending ID order
+skipping i, then 7 cue entries:
+
+=========================  ================================  ========================
+entries                    meaning                           unit / frame
+=========================  ================================  ========================
+``5k + 0``                 detected (j ∈ F_i this step)       1.0 or 0.0
+``5k + 1``, ``5k + 2``     ⁱx_j, ⁱy_j, noisy                  m, Σ_i
+``5k + 3``, ``5k + 4``     cos, sin of θ_j − θ_i, noisy       —
+``5(N−1) + 0, 1``          own x, y                           m, Σ_w
+``5(N−1) + 2, 3``          cos, sin of own yaw                —
+``5(N−1) + 4, 5``          ⁱq_m: density mean                 m, Σ_i
+``5(N−1) + 6``             density σ (``density_sigma_m``)    m
+=========================  ================================  ========================
+
+Slot k holds robot ``j = k`` if ``k < i`` else ``k + 1``
+(:class:`fov_marl.spaces.ObservationLayout` decodes it). A slot is all zeros when j
+is not inside F_i, the closed sector of amplitude β = ``fov_deg`` centred on the
+body x axis with radius R_d = ``detection_range_m``. Measurement noise is
+``N(0, Σ_MEAS)``, Σ_MEAS = ``diag(meas_cov_diag)`` = diag(0.1 m², 0.1 m², 0.5 rad²),
+truncated at ``meas_noise_clip_sigma`` = 5 standard deviations so the position
+entries stay within ``±(R_d + 5 σ)`` = ±11.58 m, the Box bounds. The density
+``φ(q) ∝ exp(−‖q − q_m‖² / 2σ²)`` is known to every robot (the paper computes u*
+locally), hence ⁱq_m and σ in the cue.
+
+State (``env.state()``)
+-----------------------
+For centralised critics: ``[x_k, y_k, cos yaw_k, sin yaw_k]`` for every robot k
+(m, Σ_w), then ``q_m`` (m, Σ_w) and σ (m).
+
+Rewards
+-------
+Cooperative: every robot gets ``reward_eta_gain · (η_t − η_{t−1})`` (default 100 × the
+gain of coverage efficiency, so an episode's undiscounted team return is
+100 (η_T − η_0)), minus ``collision_penalty`` (10) for each collision it is part
+of (centres closer than ``2 robot_radius_m`` = 1 m) and ``safety_penalty`` (1) for
+each pair closer than D_s = ``safety_distance_m`` it is part of.
+
+Termination and truncation
+--------------------------
+Coverage is a continuing task: no termination. All agents are truncated together
+after ``max_cycles`` steps (also settable as the attribute ``env.max_cycles``);
+``env.agents`` is then empty.
+
+Info
+----
+``infos[agent]["metrics"]`` (ground truth, for evaluation only, identical for every
+agent): ``eta`` (Eq. 21: φ-mass of the union of sensing disks of radius R_s,
+φ normalised over the arena), ``t_s``, ``min_distance`` (m, this step),
+``min_distance_episode``, ``collisions`` (pairs this step), ``collisions_total``,
+``safety_violations`` (pairs closer than D_s this step), ``safety_violations_total``.
+
+Rendering
+---------
+``render_mode="rgb_array"``: ``render()`` returns a ``(640, 640, 3)`` uint8 frame
+(density heat map, FoV sectors, sensing disks, robots with heading and ID).
+``"human"``: a matplotlib window, updated every step. Policies add layers with
+``env.add_render_layer(fn)`` (see :mod:`fov_marl.envs.rendering`).
+
+Ground truth for evaluation: ``env.poses`` ((N, 3) read-only copy), ``env.config``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from fov_marl.envs.base import FovEnvBase
+from fov_marl.envs.world import sample_initial_poses
+
+__all__ = ["raw_env", "parallel_env", "env", "FovCoverageEnv"]
+
+
+class FovCoverageEnv(FovEnvBase):
+    """The coverage ParallelEnv (see the module docstring)."""
+
+    metadata = {**FovEnvBase.metadata, "name": "fov_coverage_v0"}
+    scenario = "coverage"
+
+    def _state_extra_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        L = self.config.arena_size_m
+        return np.zeros(3), np.array([L, L, max(L, self.config.density_sigma_m)])
+
+    def _state_extra(self) -> np.ndarray:
+        return np.array([*self.config.density_mean_m, self.config.density_sigma_m])
+
+    def _reset_scenario(self, rng: np.random.Generator) -> np.ndarray:
+        self._targets = None
+        if self.config.initial_poses is not None:
+            return np.array(self.config.initial_poses, dtype=np.float64)
+        return sample_initial_poses(self.config, rng)
+
+    def _goal_world(self) -> np.ndarray:
+        return np.broadcast_to(np.asarray(self.config.density_mean_m), (self.config.n_agents, 2))
+
+    def _cue_scalar(self, goal_body: np.ndarray) -> np.ndarray:
+        return np.full(self.config.n_agents, self.config.density_sigma_m)
+
+    def _rewards_and_metrics(
+        self, col_i: np.ndarray, viol_i: np.ndarray, metrics: dict[str, Any], reset: bool = False
+    ) -> tuple[np.ndarray, bool]:
+        cfg = self.config
+        eta = self._cov_metric.eta(self._poses[:, :2])
+        metrics["eta"] = eta
+        if reset:
+            self._eta_prev = eta
+            return np.zeros(cfg.n_agents), False
+        gain = eta - self._eta_prev
+        self._eta_prev = eta
+        rew = (
+            cfg.reward_eta_gain * gain - cfg.collision_penalty * col_i - cfg.safety_penalty * viol_i
+        )
+        return rew.astype(np.float64), False
+
+
+def raw_env(render_mode: str | None = None, **config: Any) -> FovCoverageEnv:
+    """The ParallelEnv itself, without wrappers (same as :func:`parallel_env`)."""
+    return FovCoverageEnv(render_mode=render_mode, **config)
+
+
+def parallel_env(render_mode: str | None = None, **config: Any) -> FovCoverageEnv:
+    """PettingZoo ParallelEnv; keywords are :class:`~fov_marl.config.ScenarioConfig` fields."""
+    return FovCoverageEnv(render_mode=render_mode, **config)
+
+
+def env(render_mode: str | None = None, **config: Any):
+    """PettingZoo AEC version, through PettingZoo's ``parallel_to_aec`` conversion."""
+    return parallel_to_aec(parallel_env(render_mode=render_mode, **config))

@@ -1,0 +1,160 @@
+"""fov_crossing_v0: robots whose straight paths to their targets intersect, with a
+limited-FoV camera and no communication (paper Section VII-D, Fig. 7).
+
+============================  ==============================================================
+Import                        ``from fov_marl.envs import fov_crossing_v0``
+API                           PettingZoo ``ParallelEnv`` (``parallel_env``), AEC (``env``)
+Agents                        ``robot_0 … robot_{N−1}``, N = ``n_agents`` (default 4)
+Action space                  ``Box(-1, 1, (3,), float32)`` per agent
+Observation space             ``Box(low, high, (5 (N − 1) + 7,), float32)`` per agent
+State space                   ``Box(…, (6 N,), float32)``
+Episode                       until every robot is at its target, at most ``max_cycles``
+============================  ==============================================================
+
+Usage::
+
+    from fov_marl.envs import fov_crossing_v0
+    env = fov_crossing_v0.parallel_env(n_agents=4)
+    obs, infos = env.reset(seed=0)
+
+Layout
+------
+Robot k starts on a circle of radius ``crossing_radius_m`` (12 m) around the arena
+centre at angle 2πk/N, facing its target, the antipodal point of the circle; starts
+and targets get independent uniform jitter of ± ``crossing_jitter_m`` (0.5 m) per axis
+from the seeded generator. All straight paths therefore cross near the centre. A robot
+knows only its own target: neighbours' targets are not observable (the paper's
+worst-case motion model, Eq. 22, exists for that reason). ``initial_poses=`` overrides
+the starts; targets stay antipodal to the default starts.
+
+Arena, kinematics, action space
+-------------------------------
+As in :mod:`fov_marl.envs.fov_coverage_v0`: square arena ``[0, L]²``, exact body-frame
+integration, positions projected onto ``[r, L − r]²``; actions ``[vx, vy, ω]`` in
+``[-1, 1]`` scaled by ``v_max_mps``/``omega_max_radps``, clipped to the box, planar speed
+limited to ``v_max_mps``; NaN/inf/wrong shape raise ``ValueError`` naming the agent.
+
+Observation space
+-----------------
+Neighbour slots exactly as in the coverage env (5 per other ID: detected flag, noisy
+ⁱx_j, ⁱy_j in m, cos/sin of the noisy relative heading; zeros when j ∉ F_i), then the
+own cue:
+
+=========================  ================================  ========================
+entries                    meaning                           unit / frame
+=========================  ================================  ========================
+``5(N−1) + 0, 1``          own x, y                           m, Σ_w
+``5(N−1) + 2, 3``          cos, sin of own yaw                —
+``5(N−1) + 4, 5``          own target                         m, Σ_i
+``5(N−1) + 6``             distance to own target             m
+=========================  ================================  ========================
+
+State (``env.state()``)
+-----------------------
+``[x_k, y_k, cos yaw_k, sin yaw_k]`` for every robot k, then every target ``(x, y)``
+(m, Σ_w).
+
+Rewards
+-------
+Per robot: ``progress_gain`` × metres of progress towards its target this step
+(negative when moving away), ``arrival_bonus`` (10) the first step it comes within
+``target_tolerance_m`` (0.5 m), minus ``collision_penalty`` (10) per collision and
+``safety_penalty`` (1) per D_s violation it is part of.
+
+Termination and truncation
+--------------------------
+All agents terminate together on the step where every robot is within
+``target_tolerance_m`` of its target; otherwise all are truncated after
+``max_cycles`` steps. A robot that has arrived stays in the episode (it still moves
+and can be hit).
+
+Info
+----
+``infos[agent]["metrics"]`` (ground truth, evaluation only): ``t_s``, ``min_distance``,
+``min_distance_episode``, ``collisions``, ``collisions_total``, ``safety_violations``,
+``safety_violations_total``, ``arrived`` (robots within tolerance now),
+``arrived_ever`` (robots that have arrived at least once), ``mean_distance_to_target``,
+``max_distance_to_target`` (m).
+
+Rendering as in the coverage env, with each robot's target drawn as a cross.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from fov_marl.envs.base import FovEnvBase
+from fov_marl.envs.world import crossing_layout
+
+__all__ = ["raw_env", "parallel_env", "env", "FovCrossingEnv"]
+
+
+class FovCrossingEnv(FovEnvBase):
+    """The crossing ParallelEnv (see the module docstring)."""
+
+    metadata = {**FovEnvBase.metadata, "name": "fov_crossing_v0"}
+    scenario = "crossing"
+
+    def _state_extra_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        n, L = self.config.n_agents, self.config.arena_size_m
+        return np.zeros(2 * n), np.full(2 * n, L)
+
+    def _state_extra(self) -> np.ndarray:
+        return self._targets.reshape(-1)
+
+    def _reset_scenario(self, rng: np.random.Generator) -> np.ndarray:
+        starts, targets = crossing_layout(self.config, rng)
+        self._targets = targets
+        if self.config.initial_poses is not None:
+            starts = np.array(self.config.initial_poses, dtype=np.float64)
+        return starts
+
+    def _goal_world(self) -> np.ndarray:
+        return self._targets
+
+    def _cue_scalar(self, goal_body: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(goal_body, axis=-1)
+
+    def _rewards_and_metrics(
+        self, col_i: np.ndarray, viol_i: np.ndarray, metrics: dict[str, Any], reset: bool = False
+    ) -> tuple[np.ndarray, bool]:
+        cfg = self.config
+        dist = np.linalg.norm(self._targets - self._poses[:, :2], axis=-1)
+        here = dist < cfg.target_tolerance_m
+        if reset:
+            self._dist_prev = dist
+            self._arrived_ever = here.copy()
+            rew = np.zeros(cfg.n_agents)
+        else:
+            first = here & ~self._arrived_ever
+            self._arrived_ever |= here
+            rew = (
+                cfg.progress_gain * (self._dist_prev - dist)
+                + cfg.arrival_bonus * first
+                - cfg.collision_penalty * col_i
+                - cfg.safety_penalty * viol_i
+            )
+            self._dist_prev = dist
+        metrics["arrived"] = int(here.sum())
+        metrics["arrived_ever"] = int(self._arrived_ever.sum())
+        metrics["mean_distance_to_target"] = float(dist.mean())
+        metrics["max_distance_to_target"] = float(dist.max())
+        return rew.astype(np.float64), bool(here.all()) and not reset
+
+
+def raw_env(render_mode: str | None = None, **config: Any) -> FovCrossingEnv:
+    """The ParallelEnv itself, without wrappers (same as :func:`parallel_env`)."""
+    return FovCrossingEnv(render_mode=render_mode, **config)
+
+
+def parallel_env(render_mode: str | None = None, **config: Any) -> FovCrossingEnv:
+    """PettingZoo ParallelEnv; keywords are :class:`~fov_marl.config.ScenarioConfig` fields."""
+    return FovCrossingEnv(render_mode=render_mode, **config)
+
+
+def env(render_mode: str | None = None, **config: Any):
+    """PettingZoo AEC version, through PettingZoo's ``parallel_to_aec`` conversion."""
+    return parallel_to_aec(parallel_env(render_mode=render_mode, **config))
