@@ -1,1 +1,12 @@
-"""fov_marl.baselines."""
+"""Scripted policies (``pfcbf``, ``ideal``, ``lloyd-pf``, ``random``) and their registry.
+
+>>> from fov_marl.baselines import make_policy
+>>> policy = make_policy("random", env)
+>>> policy.reset(seed=0)
+>>> actions = policy.act(obs)
+"""
+
+from fov_marl.baselines import random_policy  # noqa: F401  (registers "random")
+from fov_marl.baselines.registry import Policy, available_policies, make_policy, register_policy
+
+__all__ = ["Policy", "available_policies", "make_policy", "register_policy"]

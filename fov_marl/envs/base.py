@@ -218,8 +218,12 @@ class FovEnvBase(ParallelEnv):
             min_d = float("inf")
         col_i, viol_i = col.sum(1), viol.sum(1)
         n_col, n_viol = int(col_i.sum() // 2), int(viol_i.sum() // 2)
-        self._collisions_total += n_col
-        self._violations_total += n_viol
+        # totals count events: a pair entering contact (or D_s) counts once, however long
+        if self.num_steps == 0:
+            self._col_prev, self._viol_prev = np.zeros_like(col), np.zeros_like(viol)
+        self._collisions_total += int(np.sum(col & ~self._col_prev) // 2)
+        self._violations_total += int(np.sum(viol & ~self._viol_prev) // 2)
+        self._col_prev, self._viol_prev = col, viol
         self._min_distance_episode = min(self._min_distance_episode, min_d)
         return {
             "t_s": self.num_steps * cfg.dt_s,

@@ -102,8 +102,10 @@ Info
 ``infos[agent]["metrics"]`` (ground truth, for evaluation only, identical for every
 agent): ``eta`` (Eq. 21: φ-mass of the union of sensing disks of radius R_s,
 φ normalised over the arena), ``t_s``, ``min_distance`` (m, this step),
-``min_distance_episode``, ``collisions`` (pairs this step), ``collisions_total``,
-``safety_violations`` (pairs closer than D_s this step), ``safety_violations_total``.
+``min_distance_episode``, ``collisions`` (pairs in contact this step),
+``collisions_total`` (collision events so far: a pair entering contact counts once,
+however many steps it stays in contact), ``safety_violations`` (pairs closer than D_s
+this step), ``safety_violations_total`` (events, like ``collisions_total``).
 
 Rendering
 ---------

@@ -301,3 +301,18 @@ def test_rendering_frames_and_layers():
     assert env2.render() is None
     with pytest.raises(ValueError):
         env.add_render_layer("not callable")
+
+
+def test_collision_totals_count_events_not_steps():
+    poses = [[20.0, 20.0, 0.0], [21.2, 20.0, np.pi]]
+    env = fov_coverage_v0.parallel_env(n_agents=2, initial_poses=poses)
+    env.reset(seed=0)
+    fwd, stop = np.array([1.0, 0.0, 0.0]), np.zeros(3)
+    env.step({"robot_0": fwd, "robot_1": fwd})  # 0.8 m: contact begins
+    for _ in range(3):  # stays in contact: still one event
+        *_, infos = env.step({"robot_0": stop, "robot_1": stop})
+        assert infos["robot_0"]["metrics"]["collisions"] == 1
+        assert infos["robot_0"]["metrics"]["collisions_total"] == 1
+    env.step({"robot_0": -fwd, "robot_1": -fwd})  # apart
+    *_, infos = env.step({"robot_0": fwd, "robot_1": fwd})  # second contact
+    assert infos["robot_0"]["metrics"]["collisions_total"] == 2
