@@ -69,7 +69,7 @@ def _check_range(
 ) -> None:
     """Raise :class:`ConfigError` unless ``value`` is finite and inside the interval."""
     lo_b = "(" if lo_open else "["
-    hi_b = ")" if hi_open else "]"
+    hi_b = ")" if hi_open or hi is None else "]"
     allowed = f"{lo_b}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{hi_b}"
     try:
         v = float(value)
@@ -84,7 +84,7 @@ def _check_range(
 
 
 def _check_int(name: str, value: Any, lo: int, hi: int | None = None) -> None:
-    allowed = f"[{lo}, {'inf' if hi is None else hi}]"
+    allowed = f"[{lo}, inf)" if hi is None else f"[{lo}, {hi}]"
     if isinstance(value, bool) or not isinstance(value, int | np.integer):
         raise ConfigError(f"{name} must be an integer in {allowed}, got {value!r}")
     if value < lo or (hi is not None and value > hi):

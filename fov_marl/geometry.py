@@ -157,6 +157,7 @@ def confidence_ellipse(
     lam1 = np.maximum(mean + rad, min_var)
     lam2 = np.maximum(mean - rad, min_var)
     psi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
+    psi = psi + np.pi * (psi <= -0.5 * np.pi)  # atan2 returns -π for sxy = -0.0
     return np.sqrt(chi2 * lam1), np.sqrt(chi2 * lam2), psi
 
 
@@ -174,7 +175,7 @@ def ellipse_distance(
     a: np.ndarray,
     b: np.ndarray,
     psi: np.ndarray,
-    n_iter: int = 8,
+    n_iter: int = 12,
 ) -> np.ndarray:
     """Exact Euclidean distance from points to filled ellipses (0 inside); replaces Eq. 8-10.
 
@@ -182,10 +183,15 @@ def ellipse_distance(
     ellipse frame with the point folded into the first quadrant ``(u, v)``, the
     nearest point is ``(a² u/(t+a²), b² v/(t+b²))`` where t > 0 is the root of
     ``F(t) = (a u/(t+a²))² + (b v/(t+b²))² − 1``. F is convex and decreasing on
-    t > 0, the root lies in ``[max(0, S − a²), S − b²]`` with
-    ``S = sqrt(a²u² + b²v²)``, and Newton from the left end converges monotonically;
-    ``n_iter = 8`` reaches ~1e-9 m on the ellipses the tracker produces (tested
-    against :func:`ellipse_distance_bruteforce`). The paper's Eq. 9 point
+    t > 0, the root lies in ``[max(0, S − a², b v − b²), S − b²]`` with
+    ``S = sqrt(a²u² + b²v²)`` (each term of F alone is ≤ 1 at the root), and Newton
+    from the left end converges monotonically. The ``b v − b²`` bound matters: without
+    it, far points near the minor axis of thin ellipses start at t ≈ 0 and Newton
+    gains only a factor 1.5 per step (8 steps left metre-size errors at axis ratio
+    10-20). With it, ``n_iter = 12`` reaches round-off (~1e-15 relative) for axis
+    ratios up to 1000 and ~1e-9 up to 1e6 (degenerate covariances), measured on
+    4e5 random cases against 400 iterations; tested against
+    :func:`ellipse_distance_bruteforce`. The paper's Eq. 9 point
     (:func:`ellipse_distance_paper`) overestimates this distance; it is exact only
     for circles.
 
@@ -209,7 +215,7 @@ def ellipse_distance(
     inside = (u / a) ** 2 + (v / b) ** 2 <= 1.0
     au, bv = a * u, b * v
     S = np.sqrt(au * au + bv * bv)
-    lo = np.maximum(S - a2, 0.0)
+    lo = np.maximum(np.maximum(S - a2, bv - b2), 0.0)
     hi = np.maximum(S - b2, lo)
     t = lo
     for _ in range(n_iter):
@@ -234,9 +240,13 @@ def ellipse_distance_paper(
     code we read it as the parametric angle equal to the bearing of the robot seen
     from the ellipse centre, in the ellipse frame, and substitute it in Eq. 8. The
     point found is on the ellipse but is the nearest one only for circles, so this
-    distance is ≥ :func:`ellipse_distance`; for the 95% ellipses of the tracker
-    (axis ratio up to ~5) the gap reaches several metres. Returns 0 inside, like
-    the exact version, so the two are comparable.
+    distance is ≥ :func:`ellipse_distance`. Measured gap (2e6 random points around
+    ellipses of axis ratio 1-5, scale-free in units of the major semi-axis a): at
+    most 0.27 a (ratio ≤ 2), 0.41 a (ratio ≤ 3), 0.55 a (ratio ≤ 5), worst for
+    points just outside the flat side; at most 0.13 a for points farther than 3 a
+    from the centre. For a 95% ellipse with a = 3 m the paper's distance is up to
+    ~1.6 m too large. Returns 0 inside, like the exact version, so the two are
+    comparable.
     """
     u, v = _to_ellipse_frame(point, center, psi)
     a = np.asarray(a, dtype=np.float64)
@@ -261,9 +271,9 @@ def ellipse_distance_bruteforce(
     by the tests to check :func:`ellipse_distance`.
     """
     u, v = _to_ellipse_frame(point, center, psi)
-    u, v = np.atleast_1d(u), np.atleast_1d(v)
-    a = np.broadcast_to(np.asarray(a, dtype=np.float64), u.shape)
-    b = np.broadcast_to(np.asarray(b, dtype=np.float64), u.shape)
+    u, v, a, b = np.broadcast_arrays(
+        u, v, np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    )
     th = np.linspace(0.0, 2.0 * np.pi, n_samples, endpoint=False)
     out = np.empty(u.shape)
     for k in np.ndindex(u.shape):

@@ -84,6 +84,21 @@ class ObservationLayout:
     n_agents: int
     agent_index: int
 
+    def __post_init__(self) -> None:
+        if isinstance(self.n_agents, bool) or not isinstance(self.n_agents, int | np.integer):
+            raise ValueError(f"n_agents must be an integer in [1, inf), got {self.n_agents!r}")
+        if self.n_agents < 1:
+            raise ValueError(f"n_agents must be an integer in [1, inf), got {self.n_agents!r}")
+        if (
+            isinstance(self.agent_index, bool)
+            or not isinstance(self.agent_index, int | np.integer)
+            or not 0 <= self.agent_index < self.n_agents
+        ):
+            raise ValueError(
+                f"agent_index must be an integer in [0, {self.n_agents - 1}], "
+                f"got {self.agent_index!r}"
+            )
+
     @property
     def n_slots(self) -> int:
         """Number of neighbour slots, N − 1."""

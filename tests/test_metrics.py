@@ -1,0 +1,324 @@
+"""Coverage efficiency η (Eq. 21), separation metrics and time-to-η."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from fov_marl.config import ScenarioConfig, make_config
+from fov_marl.metrics import (
+    CoverageMetric,
+    collision_pairs,
+    coverage_efficiency_reference,
+    eta_single_disk_at_mean,
+    gaussian_mass_in_arena,
+    grid_centres,
+    min_pairwise_distance,
+    pairwise_distances,
+    per_robot_counts,
+    safety_violations,
+    separation_metrics,
+    time_to_eta,
+)
+
+CFG = ScenarioConfig()
+METRIC = CoverageMetric(CFG)
+L = CFG.arena_size_m
+R = CFG.sensing_radius_m
+
+coord = st.floats(min_value=-10.0, max_value=50.0, allow_nan=False, allow_infinity=False)
+point = st.tuples(coord, coord)
+points = st.lists(point, min_size=0, max_size=12)
+
+
+def ring(n: int, radius: float, centre=(20.0, 20.0), phase: float = 0.0) -> np.ndarray:
+    ang = phase + 2.0 * np.pi * np.arange(n) / n
+    return np.asarray(centre) + radius * np.c_[np.cos(ang), np.sin(ang)]
+
+
+def band_weight(cfg: ScenarioConfig, cell_m: float) -> float:
+    """Normalised density mass of a band one cell wide along the circle of radius R_s
+    around q_m: ``2π R h φ(R)`` with ``φ(R) = exp(-R²/2σ²) / (2πσ²)``. Only cells in
+    this band can be misclassified by the midpoint rule, so it bounds the grid error of
+    one disk centred on q_m (up to a factor √2 for the band's true width)."""
+    Rs, s = cfg.sensing_radius_m, cfg.density_sigma_m
+    return Rs * cell_m * math.exp(-(Rs**2) / (2 * s * s)) / (s * s)
+
+
+# ----------------------------------------------------------------------------- closed form
+def test_single_disk_on_mean_matches_closed_form_at_defaults():
+    exact = eta_single_disk_at_mean(CFG)
+    assert exact == pytest.approx(1 - math.exp(-36 / (2 * 2.8**2)) / gaussian_mass_in_arena(CFG))
+    # The band of cells cut by the circle weighs 7.7e-3 at the defaults; misclassified
+    # cells on opposite sides cancel, measured error 1.1e-4. 5e-4 leaves margin.
+    assert band_weight(CFG, METRIC.cell_m) == pytest.approx(7.7e-3, rel=0.01)
+    assert abs(METRIC.eta([CFG.density_mean_m]) - exact) < 5e-4
+
+
+@given(
+    mx=st.floats(15.0, 25.0),
+    my=st.floats(15.0, 25.0),
+    sigma=st.floats(1.0, 6.0),
+    radius=st.floats(1.0, 8.0),
+)
+def test_single_disk_on_mean_matches_closed_form(mx, my, sigma, radius):
+    cfg = make_config(density_mean_m=(mx, my), density_sigma_m=sigma, sensing_radius_m=radius)
+    if min(mx, my, L - mx, L - my) < radius:
+        with pytest.raises(ValueError, match="inside the arena"):
+            eta_single_disk_at_mean(cfg)
+        return
+    m = CoverageMetric(cfg)
+    # Bound: a quarter of the boundary band (measured worst 0.07 of it over 400 random
+    # configs); the band is the most the midpoint rule can misclassify.
+    err = abs(m.eta(np.array([[mx, my]])) - eta_single_disk_at_mean(cfg))
+    assert err <= 0.25 * band_weight(cfg, m.cell_m) + 1e-12
+
+
+def test_gaussian_mass_in_arena():
+    assert gaussian_mass_in_arena(CFG) == pytest.approx(1.0, abs=1e-9)  # 20 m = 7 σ
+    corner = make_config(density_mean_m=(0.0, 0.0), density_sigma_m=3.0)
+    assert gaussian_mass_in_arena(corner) == pytest.approx(0.25, rel=1e-12)
+    edge = make_config(density_mean_m=(0.0, 20.0), density_sigma_m=3.0)
+    assert gaussian_mass_in_arena(edge) == pytest.approx(0.5, rel=1e-9)
+
+
+def test_normalisation_is_over_the_arena():
+    """A density mostly outside the arena still gives η = 1 for a fully covered arena,
+    and the grid weights sum to 1."""
+    cfg = make_config(density_mean_m=(0.0, 0.0), density_sigma_m=10.0)
+    m = CoverageMetric(cfg)
+    assert m.cell_weights.sum() == pytest.approx(1.0, abs=1e-12)
+    assert m.cell_weights.shape == (m.n_cells, m.n_cells)
+    lattice = np.stack(np.meshgrid(np.arange(0, 41, 4.0), np.arange(0, 41, 4.0)), -1)
+    assert m.eta(lattice.reshape(-1, 2)) == pytest.approx(1.0, abs=1e-12)
+
+
+# ----------------------------------------------------------------------------- reference
+def test_matches_bruteforce_reference_on_random_teams():
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 3, 6, 12, 48):
+        for _ in range(3):
+            p = rng.uniform(-8.0, 48.0, (n, 2))
+            assert METRIC.eta(p) == pytest.approx(coverage_efficiency_reference(p, CFG), abs=1e-12)
+
+
+def test_matches_bruteforce_reference_with_circles_through_cell_centres():
+    """Disk centres on the grid's cell centres and corners put cell centres exactly on
+    (or within round-off of) the circle: the fast kernel's run ends must follow the
+    same floating-point test as the reference there."""
+    rng = np.random.default_rng(7)
+    h = METRIC.cell_m
+    for _ in range(40):
+        p = (rng.integers(-5, 405, (4, 2)) + rng.choice([0.0, 0.5], (4, 2))) * h
+        assert METRIC.eta(p) == pytest.approx(coverage_efficiency_reference(p, CFG), abs=1e-12)
+
+
+@given(points)
+def test_matches_bruteforce_reference_property(pts):
+    """Same grid, same floating-point membership test: equal up to summation order,
+    including disks whose circle passes exactly through cell centres."""
+    p = np.array(pts, dtype=np.float64).reshape(-1, 2)
+    assert METRIC.eta(p) == pytest.approx(coverage_efficiency_reference(p, CFG), abs=1e-12)
+
+
+@pytest.mark.parametrize(
+    "positions",
+    [
+        np.array([[20.0, 20.0]]),
+        np.array([[13.37, 24.2]]),
+        np.vstack([[20.0, 20.0], ring(5, 7.0)]),
+        np.array([[3.0, 37.5], [-2.0, 20.0], [25.1, 18.7]]),
+    ],
+    ids=["on-mean", "off-mean", "centre+ring", "at-walls"],
+)
+def test_close_to_a_dense_reference(positions):
+    """The default 0.1 m grid against a 0.02 m one (25x the cells): the continuum value
+    is within the band weight (7.7e-3 per disk) of both; measured gaps are ~1e-5-1e-4."""
+    dense = coverage_efficiency_reference(positions, CFG, cell_m=0.02)
+    assert METRIC.eta(positions) == pytest.approx(dense, abs=5e-4)
+
+
+# ----------------------------------------------------------------------------- properties
+@given(points, point)
+def test_adding_a_disk_never_decreases_eta(pts, extra):
+    p = np.array(pts, dtype=np.float64).reshape(-1, 2)
+    before = METRIC.eta(p)
+    after = METRIC.eta(np.vstack([p, [extra]]))
+    assert 0.0 <= before <= 1.0
+    assert 0.0 <= after <= 1.0
+    assert after >= before - 1e-12
+
+
+@given(points)
+def test_eta_invariant_to_order_and_duplicates(pts):
+    p = np.array(pts, dtype=np.float64).reshape(-1, 2)
+    e = METRIC.eta(p)
+    assert METRIC.eta(p[::-1]) == pytest.approx(e, abs=1e-12)
+    assert METRIC.eta(np.vstack([p, p])) == pytest.approx(e, abs=1e-12)
+
+
+@given(points)
+def test_eta_symmetric_under_reflection_about_the_density_mean(pts):
+    """q_m is the arena centre and the grid is symmetric about it."""
+    p = np.array(pts, dtype=np.float64).reshape(-1, 2)
+    e = METRIC.eta(p)
+    assert METRIC.eta(np.c_[L - p[:, 0], p[:, 1]]) == pytest.approx(e, abs=1e-9)
+    assert METRIC.eta(p[:, ::-1]) == pytest.approx(e, abs=1e-9)
+
+
+@given(
+    st.lists(
+        st.one_of(
+            st.tuples(st.floats(-1e6, -R - 1e-6), coord),
+            st.tuples(st.floats(L + R + 1e-6, 1e6), coord),
+            st.tuples(coord, st.floats(-1e6, -R - 1e-6)),
+            st.tuples(coord, st.floats(L + R + 1e-6, 1e300)),
+        ),
+        min_size=1,
+        max_size=6,
+    ),
+    points,
+)
+def test_disks_outside_the_arena_contribute_nothing(outside, inside):
+    out = np.array(outside, dtype=np.float64)
+    p = np.array(inside, dtype=np.float64).reshape(-1, 2)
+    assert METRIC.eta(out) == 0.0
+    assert METRIC.eta(np.vstack([p, out])) == METRIC.eta(p)
+
+
+def test_disk_partly_outside_counts_only_its_inside_part():
+    corner = METRIC.eta([[0.0, 0.0]])
+    inside = METRIC.eta([[R, R]])
+    assert 0.0 < corner < inside
+
+
+def test_empty_team_and_bad_input():
+    assert METRIC.eta(np.zeros((0, 2))) == 0.0
+    with pytest.raises(ValueError, match=r"shape \(N, 2\)"):
+        METRIC.eta(np.zeros(2))
+    with pytest.raises(ValueError, match=r"shape \(N, 2\)"):
+        METRIC.eta(np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="finite"):
+        METRIC.eta([[np.nan, 1.0]])
+    with pytest.raises(ValueError, match="finite"):
+        METRIC.eta([[np.inf, 1.0]])
+
+
+def test_call_is_eta():
+    p = ring(3, 4.0)
+    assert METRIC(p) == METRIC.eta(p)
+
+
+def test_grid_tiles_the_arena():
+    c, h = grid_centres(40.0, 0.1)
+    assert c.size == 400 and h == pytest.approx(0.1)
+    c, h = grid_centres(10.0, 0.3)  # 10 / 0.3 = 33.3 -> 34 cells of 0.294 m
+    assert c.size == 34 and h == pytest.approx(10.0 / 34) and h <= 0.3
+    assert c[0] == pytest.approx(h / 2) and c[-1] == pytest.approx(10.0 - h / 2)
+    with pytest.raises(ValueError, match="cell_m"):
+        grid_centres(10.0, 0.0)
+
+
+# ----------------------------------------------------------------------------- the paper's η
+def test_six_good_robots_reach_0999_and_one_robot_does_not():
+    """Section VII-B: six robots reach η ≈ 1; the default density (σ = 2.8 m) leaves a
+    single robot well below. Measured: one robot on q_m 0.8992 (closed form 0.8993);
+    one on q_m plus five on a ring of 7 m 0.99976, of 9 m 0.99989."""
+    one = METRIC.eta([CFG.density_mean_m])
+    assert one <= 0.9
+    for radius in (7.0, 9.0):
+        six = np.vstack([CFG.density_mean_m, ring(5, radius)])
+        assert METRIC.eta(six) >= 0.999
+    # The best single robot is the one on the mean.
+    rng = np.random.default_rng(1)
+    assert max(METRIC.eta(p[None]) for p in rng.uniform(0, L, (50, 2))) <= one + 1e-12
+
+
+def test_separated_robots_cover_more_than_clustered():
+    clustered = np.vstack([CFG.density_mean_m, ring(5, 1.0)])
+    spread = np.vstack([CFG.density_mean_m, ring(5, 7.0)])
+    assert METRIC.eta(clustered) < METRIC.eta(spread)
+
+
+# ----------------------------------------------------------------------------- separation
+def test_pairwise_distances_against_a_loop():
+    rng = np.random.default_rng(2)
+    p = rng.uniform(0, 40, (7, 2))
+    d = pairwise_distances(p)
+    ref = np.array([[math.dist(a, b) for b in p] for a in p])
+    np.testing.assert_allclose(d, ref, rtol=1e-12, atol=1e-12)
+    assert np.array_equal(d, d.T) and np.all(np.diag(d) == 0.0)
+    iu = np.triu_indices(7, 1)
+    assert min_pairwise_distance(p) == pytest.approx(ref[iu].min())
+
+
+def test_min_pairwise_distance_of_fewer_than_two_robots_is_inf():
+    assert min_pairwise_distance(np.zeros((1, 2))) == math.inf
+    assert min_pairwise_distance(np.zeros((0, 2))) == math.inf
+
+
+# Robots 0-1: 0.9 m (collision and violation); 2-3: exactly 1.0 m (no collision: strict,
+# but a violation); 3-4: 1.5 m (violation); 5 alone; 6-7: exactly 2.0 m (nothing).
+CASE = np.array(
+    [
+        [5.0, 5.0],
+        [5.9, 5.0],
+        [20.0, 20.0],
+        [21.0, 20.0],
+        [22.5, 20.0],
+        [35.0, 35.0],
+        [10.0, 30.0],
+        [10.0, 32.0],
+    ]
+)
+
+
+def test_collisions_and_safety_violations_on_a_constructed_case():
+    col = collision_pairs(CASE, CFG.collision_distance_m)
+    saf = safety_violations(CASE, CFG.safety_distance_m)
+    assert col.tolist() == [[0, 1]]
+    assert saf.tolist() == [[0, 1], [2, 3], [3, 4]]
+    assert per_robot_counts(col, 8).tolist() == [1, 1, 0, 0, 0, 0, 0, 0]
+    assert per_robot_counts(saf, 8).tolist() == [1, 1, 1, 2, 1, 0, 0, 0]
+    m = separation_metrics(CASE, CFG.collision_distance_m, CFG.safety_distance_m)
+    assert m["collisions"] == 1 and m["safety_violations"] == 3
+    assert m["min_distance"] == pytest.approx(0.9)
+    assert m["collisions_per_robot"].tolist() == [1, 1, 0, 0, 0, 0, 0, 0]
+    assert m["safety_violations_per_robot"].tolist() == [1, 1, 1, 2, 1, 0, 0, 0]
+
+
+def test_three_robots_on_one_spot_are_three_collisions():
+    p = np.array([[1.0, 1.0], [1.0, 1.0], [1.2, 1.0], [9.0, 9.0]])
+    col = collision_pairs(p, 1.0)
+    assert col.tolist() == [[0, 1], [0, 2], [1, 2]]
+    assert per_robot_counts(col, 4).tolist() == [2, 2, 2, 0]
+
+
+def test_separation_bad_input():
+    with pytest.raises(ValueError, match="collision_distance"):
+        collision_pairs(CASE, -1.0)
+    with pytest.raises(ValueError, match="safety_distance"):
+        safety_violations(CASE, np.nan)
+    with pytest.raises(ValueError, match="positions_world"):
+        pairwise_distances(np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="robot indices"):
+        per_robot_counts(np.array([[0, 5]]), 3)
+    assert per_robot_counts(np.zeros((0, 2), dtype=int), 3).tolist() == [0, 0, 0]
+
+
+# ----------------------------------------------------------------------------- time to η
+def test_time_to_eta():
+    series = [0.2, 0.5, 0.98, 0.99, 0.995, 0.97]
+    assert time_to_eta(series, 0.2) == pytest.approx(0.6)  # index 3, reached exactly
+    assert time_to_eta(series, 0.2, t0=0.2) == pytest.approx(0.8)
+    assert time_to_eta(series, 0.5, threshold=0.5) == pytest.approx(0.5)
+    assert time_to_eta(series, 0.2, threshold=0.999) is None
+    assert time_to_eta([], 0.2) is None
+    with pytest.raises(ValueError, match="dt"):
+        time_to_eta(series, 0.0)
+    with pytest.raises(ValueError, match="threshold"):
+        time_to_eta(series, 0.2, threshold=1.5)
