@@ -90,11 +90,26 @@ EVAL_COLUMNS = (
 )
 
 
+def _is_model(policy: str) -> bool:
+    return policy.endswith(".zip") or os.path.isdir(policy)
+
+
+def _env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    """Config keywords given on the command line; scenario/model defaults fill the rest."""
+    kw: dict[str, Any] = {}
+    for flag in ("n_agents", "fov_deg", "max_cycles"):
+        if getattr(args, flag, None) is not None:
+            kw[flag] = getattr(args, flag)
+    if not _is_model(args.policy):
+        kw.setdefault("fov_deg", 120.0)
+    return kw
+
+
 def _episode_job(job: dict[str, Any]) -> dict[str, Any]:
     from fov_marl.evaluation import run_episode
 
     policy = job.pop("policy")
-    if policy.endswith(".zip") or os.path.isdir(policy):
+    if _is_model(policy):
         from fov_marl.training import load_policy  # torch only for learned policies
 
         loaded = load_policy(policy)
@@ -110,9 +125,7 @@ def _episode_job(job: dict[str, Any]) -> dict[str, Any]:
 def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     from fov_marl.evaluation import EpisodeRecord, summarize
 
-    env_kwargs: dict[str, Any] = {"n_agents": args.n_agents, "fov_deg": args.fov_deg}
-    if args.max_cycles is not None:
-        env_kwargs["max_cycles"] = args.max_cycles
+    env_kwargs = _env_kwargs(args)
     # validate the config once, here, so a bad value is one clear line
     from fov_marl.config import make_config
 
@@ -192,9 +205,7 @@ def _progress(k: int, n: int, t0: float, quiet: bool) -> None:
 def run_render(args: argparse.Namespace) -> Path:
     from fov_marl.video import render_episode
 
-    env_kwargs: dict[str, Any] = {"n_agents": args.n_agents, "fov_deg": args.fov_deg}
-    if args.max_cycles is not None:
-        env_kwargs["max_cycles"] = args.max_cycles
+    env_kwargs = _env_kwargs(args)
     path = render_episode(
         scenario=args.scenario,
         policy=args.policy,
@@ -247,12 +258,17 @@ def build_parser() -> argparse.ArgumentParser:
             default=policy_default,
             help="registered policy (pfcbf, ideal, lloyd-pf, random) or PATH to a trained model.zip",
         )
-        sp.add_argument("--n-agents", type=_positive_int("--n-agents"), default=6, help="robots N")
+        sp.add_argument(
+            "--n-agents",
+            type=_positive_int("--n-agents"),
+            default=None,
+            help="robots N (default: 6 for coverage, 4 for crossing, or a model's training config)",
+        )
         sp.add_argument(
             "--fov-deg",
             type=_float_in("--fov-deg", 0.0, 360.0, lo_open=True),
-            default=120.0,
-            help="camera FoV amplitude beta (degrees, (0, 360])",
+            default=None,
+            help="camera FoV amplitude beta in degrees, (0, 360] (default: 120, or a model's training config)",
         )
         sp.add_argument("--seed", type=int, default=0, help="first seed; episode k uses seed + k")
         sp.add_argument(

@@ -147,7 +147,7 @@ def run_episode(
         t_filter = 0.0
         if "safety" in info0:
             have_filter = True
-            t_filter = info0["safety"].get("team_cpu_s", 0.0)
+            t_filter = float(getattr(env, "last_cpu_s", 0.0))
             interventions += sum(int(infos[a]["safety"]["intervened"]) for a in infos)
             fallbacks += sum(int(infos[a]["safety"]["fallback"]) for a in infos)
         cpu.append((t_policy + t_filter) * 1e3 / n)

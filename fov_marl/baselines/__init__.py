@@ -6,7 +6,7 @@
 >>> actions = policy.act(obs)
 """
 
-from fov_marl.baselines import random_policy  # noqa: F401  (registers "random")
+from fov_marl.baselines import pfcbf, random_policy  # noqa: F401  (register the policies)
 from fov_marl.baselines.registry import Policy, available_policies, make_policy, register_policy
 
 __all__ = ["Policy", "available_policies", "make_policy", "register_policy"]

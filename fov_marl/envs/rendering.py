@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from PIL import Image, ImageDraw
 
-__all__ = ["Canvas", "RenderLayer", "robot_color", "render_frame"]
+__all__ = ["Canvas", "RenderLayer", "robot_color", "render_frame", "draw_beliefs"]
 
 RenderLayer = Callable[["Canvas"], None]
 
@@ -205,3 +205,40 @@ class HumanWindow:
 
     def close(self) -> None:
         self._plt.close(self.fig)
+
+
+def draw_beliefs(
+    canvas: Canvas, pipeline, robots: Sequence[int] = (0,), particles: bool = True
+) -> None:
+    """Draw robots' beliefs from a :class:`fov_marl.pipeline.PfCbfPipeline`: particles and
+    95% ellipses, coloured by neighbour, placed with each robot's own pose estimate.
+
+    Duck-typed on the pipeline (``bank``, ``own_pose``, ``estimates_view``) so the env
+    layer does not import the controller layer.
+    """
+    from fov_marl.geometry import body_to_world
+
+    est = pipeline.estimates_view()
+    if est is None:
+        return
+    for i in robots:
+        pose = pipeline.own_pose[i]
+        bank = pipeline.bank
+        if particles and bank is not None:
+            p_body, owner = bank.particles_body(i)
+            pw = body_to_world(p_body, pose)
+            step = max(1, len(pw) // 1500)
+            pw, owner = pw[::step], owner[::step]
+            for j in np.unique(owner):
+                canvas.points(pw[owner == j], robot_color(int(j)) + (110,), radius_px=0.8)
+        if "ellipse_a" in est:
+            for k, j in enumerate(est["ids"][i]):
+                c = body_to_world(est["mean_body"][i, k], pose)
+                canvas.ellipse(
+                    c,
+                    float(est["ellipse_a"][i, k]),
+                    float(est["ellipse_b"][i, k]),
+                    float(est["ellipse_psi"][i, k] + pose[2]),
+                    outline=robot_color(int(j)) + (220,),
+                    width=2,
+                )

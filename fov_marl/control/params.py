@@ -1,0 +1,200 @@
+"""Controller parameters: the choices the paper leaves open for Section VI and VII-A.
+
+All fields are validated on construction; a bad value raises
+:class:`~fov_marl.config.ConfigError` (a ``ValueError``) naming the field and its
+allowed range. The scenario's physical quantities (β, D_s, R_d, R_s, v_max, ω_max,
+arena, density, dt) live in :class:`~fov_marl.config.ScenarioConfig`; this class
+holds only the controller's own knobs.
+
+Defaults and where they come from
+=================================
+
+===========================  ========  ===============================================
+field                        default   source / reason
+===========================  ========  ===============================================
+``alpha_border_gain``        1.0       γ₁ (1/s) of the border rows' class-K function
+                                       ``α_b(h) = γ₁ h + γ₃ h³`` (h in m): the linear term
+                                       of Theorem 1 (Eq. 14-15) gives a feasible
+                                       exponential recovery from small violations
+``alpha_border_cubic``       0.1       γ₃ (1/(m² s)): the authors' cubic (their code:
+                                       γ₁ = 0, γ₃ = 1). The growth is what makes a
+                                       released neighbour's border rows inactive
+                                       (Eq. 17: with ε = h_max, ``h + ε ≥ 113 − 2‖p‖`` m
+                                       must outrun the rotation authority
+                                       ``≈ 2‖p‖ ω_max``); γ₃ = 0.1 prunes them up to
+                                       ‖p‖ ≈ 50 m while a neighbour 3 m outside the
+                                       border still asks for a feasible 5.7 m/s rather
+                                       than the pure cubic's bang-bang 27 m/s
+``alpha_safety_gain``        2.5       linear, 1/s (h in m²). The authors used 5 with a
+                                       0.2-0.25 s period: γ·dt = 1-1.25 is at/over the
+                                       edge of the discrete-time condition
+                                       ``h_{k+1} ≥ (1 − γ dt) h_k``, so any error in the
+                                       neighbour's velocity estimate lands inside D_s.
+                                       2.5 keeps γ·dt = 0.5 at dt = 0.2 s.
+``alpha_range_gain``         1.0       authors' code, linear, 1/s (h in m²)
+``slack_slope``              1.0       s of Eq. 16-17 (1/m); authors 1 (a later branch 2)
+``slack_zero_below_ds``      True      ε(d) ≡ 0 for d ≤ D_s (see :func:`~fov_marl.control.
+                                       cbf.slack`); False gives the paper's raw formula
+``fov_margin_m``             0.05      the FoV rows keep j this far inside the sector
+                                       borders and range (absorbs the discrete-time
+                                       overshoot of the continuous-time CBF)
+``safety_first``             True      the safety rows of every neighbour form one level
+                                       above all FoV levels (False: the paper's per-
+                                       neighbour levels, see :mod:`~fov_marl.control.
+                                       controller`)
+``safety_hard``              False     True: safety rows take no κ (infeasible → brake)
+``safety_speed_margin_mps``  0.0       robust margin on the neighbour's speed estimate
+                                       (paper: 0); see :func:`~fov_marl.control.cbf.cbf_rows`
+``max_levels``               3         cap on FoV cascade levels: the two nearest
+                                       neighbours with a possibly active row get their
+                                       own level, the rest share the third (bounds the
+                                       QPs per step: ≤ 2 per level, 4 levels with the
+                                       safety level)
+``n_polygon``                16        sides of the polygon inscribed in ``‖v‖ ≤ v_max``
+``prune``                    True      drop rows that hold for every admissible input
+``qp_backend``               "nnls"    exact active-set least-distance QPs (scipy);
+                                       "osqp" kept for comparison (see
+                                       :mod:`~fov_marl.control.qp`)
+``row_clip``                 10.0      C: normalised row offsets clipped to [−C, C]
+``cascade_reg``              1e-3      ρ, weight of ‖u − u*‖² in the cascade QPs (its O(ρ)
+                                       bias only touches infeasible levels; smaller ρ
+                                       costs NNLS accuracy, ~1e-6 at 1e-3)
+``qp_eps``                   1e-6      OSQP eps_abs = eps_rel (osqp backend only)
+``qp_max_iter``              4000      OSQP max_iter (osqp backend only)
+``intervention_tol``         1e-3      ``intervened`` when ‖u − proj(u*)‖ > tol
+``kp_coverage``              0.8       K_p of the Lloyd law (authors' code), 1/s
+``k_omega``                  1.0       heading gain of the facing law, 1/s
+``face_distance_m``          0.5       below this distance to the goal, ω fades to 0
+``lloyd_grid_m``             0.4       Lloyd stencil spacing (see
+                                       :func:`~fov_marl.control.benchmark.bench_lloyd_resolution`)
+``lloyd_min_mass``           1e-9      cell mass under φ below which u* heads for q_m
+===========================  ========  ===============================================
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fov_marl.config import ConfigError
+
+__all__ = ["ControllerParams"]
+
+
+def _check(name: str, value: Any, lo: float, hi: float, *, lo_open: bool = False) -> None:
+    allowed = f"{'(' if lo_open else '['}{lo}, {hi}]"
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} must be a real number in {allowed}, got {value!r}") from None
+    if isinstance(value, bool) or not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
+        raise ConfigError(f"{name} must be in {allowed}, got {value!r}")
+
+
+def _check_int(name: str, value: Any, lo: int, hi: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not lo <= value <= hi:
+        raise ConfigError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
+
+
+def _check_bool(name: str, value: Any) -> None:
+    if not isinstance(value, bool | np.bool_):
+        raise ConfigError(f"{name} must be a bool, got {value!r}")
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    """Knobs of the FoV-CBF controller and of the coverage law (see module docstring).
+
+    Attributes:
+        alpha_border_gain: γ₁ of the border-row class-K function
+            ``α_b(h) = γ₁ h + γ₃ h³`` (Eq. 11), 1/s, in [0, 1e6].
+        alpha_border_cubic: γ₃ of ``α_b``, 1/(m² s), in [0, 1e6]; γ₁ + γ₃ > 0.
+        alpha_safety_gain: γ_s of ``α_s(h) = γ_s h`` for the safety row (1/s), (0, 1e6].
+        alpha_range_gain: γ_r of ``α_r(h) = γ_r h`` for the range row (1/s), (0, 1e6].
+        slack_slope: s of ``ε = h_max σ(s (d − 3 D_s))`` (1/m), (0, 100].
+        slack_zero_below_ds: shift and rescale the sigmoid so ε(D_s) = 0 exactly.
+        fov_margin_m: inward margin of the FoV rows (m), in [0, 1].
+        safety_first: all safety rows form the top cascade level.
+        safety_hard: safety rows are hard constraints (no κ); infeasible → brake.
+        safety_speed_margin_mps: δv ≥ 0, the safety row is made robust to an error of
+            norm ≤ δv in the neighbour's velocity estimate (m/s), [0, 100].
+        max_levels: maximum number of FoV cascade levels, in [1, 256]; neighbours
+            beyond ``max_levels − 1`` share the last level.
+        n_polygon: sides of the regular polygon inscribed in the speed disk, [4, 256].
+        prune: drop rows that hold for every admissible input before the QPs.
+        qp_backend: ``"nnls"`` (exact active set via scipy) or ``"osqp"`` (see
+            :mod:`fov_marl.control.qp` for the measured comparison).
+        row_clip: C, normalised row offsets are clipped to [−C, C], in [2, 1e6].
+        cascade_reg: ρ, weight of ‖u − u*‖² in the cascade QPs, in [1e-8, 1e-2].
+        qp_eps: OSQP absolute and relative tolerance (osqp backend), in (0, 1e-2].
+        qp_max_iter: OSQP iteration cap (osqp backend), in [10, 10^6].
+        intervention_tol: ‖u − u*‖ above which ``intervened`` is True, [0, 1].
+        kp_coverage: K_p of the coverage and crossing proportional laws (1/s), (0, 100].
+        k_omega: gain of the facing law (1/s), (0, 100].
+        face_distance_m: distance to the goal below which ω fades linearly to 0, (0, 100].
+        lloyd_grid_m: spacing of the Lloyd quadrature stencil (m), (0, 2].
+        lloyd_min_mass: probability mass of the cell under φ below which the robot heads
+            for q_m instead of the centroid, in [0, 1).
+    """
+
+    alpha_border_gain: float = 1.0
+    alpha_border_cubic: float = 0.1
+    alpha_safety_gain: float = 2.5
+    alpha_range_gain: float = 1.0
+    slack_slope: float = 1.0
+    slack_zero_below_ds: bool = True
+    fov_margin_m: float = 0.05
+    safety_first: bool = True
+    safety_hard: bool = False
+    safety_speed_margin_mps: float = 0.0
+    max_levels: int = 3
+    n_polygon: int = 16
+    prune: bool = True
+    qp_backend: str = "nnls"
+    row_clip: float = 10.0
+    cascade_reg: float = 1e-3
+    qp_eps: float = 1e-6
+    qp_max_iter: int = 4000
+    intervention_tol: float = 1e-3
+    kp_coverage: float = 0.8
+    k_omega: float = 1.0
+    face_distance_m: float = 0.5
+    lloyd_grid_m: float = 0.4
+    lloyd_min_mass: float = 1e-9
+
+    def __post_init__(self) -> None:
+        _check("alpha_border_gain", self.alpha_border_gain, 0.0, 1e6)
+        _check("alpha_border_cubic", self.alpha_border_cubic, 0.0, 1e6)
+        if self.alpha_border_gain + self.alpha_border_cubic <= 0.0:
+            raise ConfigError(
+                "alpha_border_gain + alpha_border_cubic must be > 0 (a class-K function), "
+                f"got {self.alpha_border_gain!r} + {self.alpha_border_cubic!r}"
+            )
+        _check("alpha_safety_gain", self.alpha_safety_gain, 0.0, 1e6, lo_open=True)
+        _check("alpha_range_gain", self.alpha_range_gain, 0.0, 1e6, lo_open=True)
+        _check("slack_slope", self.slack_slope, 0.0, 100.0, lo_open=True)
+        for name in ("slack_zero_below_ds", "safety_first", "safety_hard", "prune"):
+            _check_bool(name, getattr(self, name))
+        _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)
+        _check("safety_speed_margin_mps", self.safety_speed_margin_mps, 0.0, 100.0)
+        _check_int("max_levels", self.max_levels, 1, 256)
+        _check_int("n_polygon", self.n_polygon, 4, 256)
+        if self.qp_backend not in ("nnls", "osqp"):
+            raise ConfigError(
+                f"qp_backend must be one of ('nnls', 'osqp'), got {self.qp_backend!r}"
+            )
+        _check("row_clip", self.row_clip, 2.0, 1e6)
+        _check("cascade_reg", self.cascade_reg, 1e-8, 1e-2)
+        _check("qp_eps", self.qp_eps, 0.0, 1e-2, lo_open=True)
+        _check_int("qp_max_iter", self.qp_max_iter, 10, 10**6)
+        _check("intervention_tol", self.intervention_tol, 0.0, 1.0)
+        _check("kp_coverage", self.kp_coverage, 0.0, 100.0, lo_open=True)
+        _check("k_omega", self.k_omega, 0.0, 100.0, lo_open=True)
+        _check("face_distance_m", self.face_distance_m, 0.0, 100.0, lo_open=True)
+        _check("lloyd_grid_m", self.lloyd_grid_m, 0.0, 2.0, lo_open=True)
+        _check("lloyd_min_mass", self.lloyd_min_mass, 0.0, 1.0)
+        if self.lloyd_min_mass >= 1.0:
+            raise ConfigError(f"lloyd_min_mass must be in [0, 1), got {self.lloyd_min_mass!r}")

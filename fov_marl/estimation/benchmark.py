@@ -1,0 +1,107 @@
+"""Tracker speed benchmark: milliseconds per robot-step, single tracker and batched bank.
+
+Used by ``benchmarks/bench_tracker.py`` and (later) ``fov-marl bench``. The observations
+come from :class:`fov_marl.estimation.testing.MiniWorld` (robots on smooth random
+paths, the paper's camera and noise); recording them is not timed.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable
+
+import numpy as np
+
+from fov_marl.config import make_config
+from fov_marl.estimation.params import TrackerParams
+from fov_marl.estimation.testing import MiniWorld, RandomMotion
+from fov_marl.estimation.tracker import NeighborTracker, TrackerBank
+
+__all__ = ["bench_tracker", "format_table"]
+
+
+def _record(n_agents: int, steps: int, seed: int):
+    cfg = make_config(n_agents=n_agents)
+    world = MiniWorld(cfg, np.random.default_rng(seed))
+    pol = RandomMotion(cfg, np.random.default_rng(seed + 1))
+    poses0, obs0 = world.poses.copy(), world.observe()
+    acts, obs = [], []
+    for _ in range(steps):
+        a = pol(world.poses)
+        obs.append(world.step(a))
+        acts.append(a)
+    return cfg, poses0, obs0, acts, obs
+
+
+def bench_tracker(
+    p_totals: Iterable[int] = (1000, 2000, 5000),
+    n_agents: Iterable[int] = (6, 12, 48),
+    steps: int = 100,
+    warmup: int = 10,
+    seed: int = 0,
+    single: bool = True,
+    bank: bool = True,
+) -> list[dict]:
+    """Time the tracker per robot-step.
+
+    For each (P_T, N): a :class:`NeighborTracker` of robot 0 stepped alone
+    (``single_ms_per_robot_step``) and a :class:`TrackerBank` of all N robots
+    (``bank_ms_per_robot_step`` = bank step time / N), over ``steps`` recorded steps after
+    ``warmup`` untimed ones.
+
+    Returns:
+        One dict per (P_T, N): ``p_total, n_agents, n_neighbours, steps,
+        single_ms_per_robot_step, bank_ms_per_robot_step`` (``None`` when skipped).
+    """
+    if steps < 1 or warmup < 0:
+        raise ValueError(f"steps must be >= 1 and warmup >= 0, got {steps}, {warmup}")
+    rows = []
+    for n in n_agents:
+        cfg, poses0, obs0, acts, obs = _record(int(n), warmup + steps, seed)
+        for p_total in p_totals:
+            params = TrackerParams(n_particles_total=int(p_total))
+            row: dict = {
+                "p_total": int(p_total),
+                "n_agents": int(n),
+                "n_neighbours": int(n) - 1,
+                "steps": int(steps),
+                "single_ms_per_robot_step": None,
+                "bank_ms_per_robot_step": None,
+            }
+            if single:
+                tr = NeighborTracker(cfg, 0, params, np.random.default_rng(seed))
+                tr.reset(obs0[0], poses0)
+                for t in range(warmup):
+                    tr.step(acts[t][0], obs[t][0])
+                t0 = time.perf_counter()
+                for t in range(warmup, warmup + steps):
+                    tr.step(acts[t][0], obs[t][0])
+                row["single_ms_per_robot_step"] = (time.perf_counter() - t0) / steps * 1e3
+            if bank:
+                b = TrackerBank(cfg, params, seed=seed)
+                b.reset(obs0, poses0)
+                for t in range(warmup):
+                    b.step(acts[t], obs[t])
+                t0 = time.perf_counter()
+                for t in range(warmup, warmup + steps):
+                    b.step(acts[t], obs[t])
+                row["bank_ms_per_robot_step"] = (time.perf_counter() - t0) / steps / n * 1e3
+            rows.append(row)
+    return rows
+
+
+def format_table(rows: list[dict]) -> str:
+    """Plain-text table of :func:`bench_tracker` rows."""
+
+    def f(v):
+        return "-" if v is None else f"{v:.3f}"
+
+    lines = [
+        f"{'P_T':>6} {'N':>4} {'single ms/robot-step':>21} {'bank ms/robot-step':>19}",
+    ]
+    for r in rows:
+        lines.append(
+            f"{r['p_total']:>6} {r['n_agents']:>4} {f(r['single_ms_per_robot_step']):>21} "
+            f"{f(r['bank_ms_per_robot_step']):>19}"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,392 @@
+"""Vectorised kernels of the particle-filter bank (paper Section IV-V).
+
+Pure functions on flat particle arrays. Conventions used throughout:
+
+* Particles are stored as separate contiguous arrays ``x, y, h`` (body frame Σ_i of the
+  robot that owns the tracker: metres, metres, relative heading θ_j − θ_i in rad).
+* A *block* is the contiguous run of particles of one (robot, neighbour) pair; the flat
+  arrays are sorted by block. ``block_of`` (``(F,)`` int) gives each particle's block,
+  ``block_start`` (``(B,)`` int) the flat index of each block's first particle. Blocks are
+  never empty.
+* Several robots can share the flat arrays (the batched bank): each robot owns a *row* of
+  exactly ``row_len = P_T`` particles, so row ``r`` is ``[r P_T, (r + 1) P_T)``. Every
+  kernel computes each block from that block's data only (cumulative sums run per row),
+  so a robot gives bit-identical numbers alone or inside a bank.
+
+Nothing here draws random numbers: draws are passed in, so the caller controls the
+order of draws of each robot's Generator.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fov_marl.geometry import integrate_unicycle, world_to_body
+
+__all__ = [
+    "wrap",
+    "in_fov_xy",
+    "coverage_input",
+    "crossing_input",
+    "own_motion",
+    "to_new_body_frame",
+    "measurement_log_likelihood",
+    "deletion_mask",
+    "weighted_moments",
+    "effective_sample_size",
+    "allocate_budget",
+    "systematic_resample_indices",
+    "equal_split",
+]
+
+_TWO_PI = 2.0 * math.pi
+_INV_TWO_PI = 1.0 / _TWO_PI
+
+
+def wrap(a: np.ndarray) -> np.ndarray:
+    """Wrap angles (rad) to ``[-π, π]`` with ``a − 2π rint(a / 2π)`` (faster than ``mod``).
+
+    Differs from :func:`fov_marl.geometry.wrap_angle` only in returning ``+π`` for odd
+    multiples of π that round up; every use here squares or rotates by the result.
+    """
+    return a - _TWO_PI * np.rint(a * _INV_TWO_PI)
+
+
+def in_fov_xy(x: np.ndarray, y: np.ndarray, fov_rad: float, range_m: float) -> np.ndarray:
+    """Camera sector membership F_i on separate coordinate arrays (Eq. 4's ``k ∈ F_i``).
+
+    The same arithmetic as :func:`fov_marl.geometry.in_fov` (closed sector of amplitude
+    β centred on the body x axis, radius R_d, origin excluded), on ``x`` and ``y`` arrays
+    instead of a stacked ``(..., 2)`` array, so the tracker avoids a copy; the tests check
+    the two agree bit for bit.
+
+    Args:
+        x, y: ``(...)`` body-frame coordinates (m).
+        fov_rad: β in (0, 2π].
+        range_m: R_d > 0.
+
+    Returns:
+        ``(...)`` boolean mask.
+    """
+    r2 = x * x + y * y
+    inside = (r2 <= range_m * range_m) & (r2 > 0.0)
+    if fov_rad >= _TWO_PI:
+        return inside
+    half = 0.5 * fov_rad
+    if half <= 0.5 * math.pi:
+        if half < 0.5 * math.pi:
+            ang_ok = (x > 0.0) & (np.abs(y) <= np.tan(half) * x)
+        else:
+            ang_ok = x >= 0.0
+    else:
+        t = np.tan(math.pi - half)
+        ang_ok = ~((x < 0.0) & (np.abs(y) < t * (-x)))
+    return inside & ang_ok
+
+
+def coverage_input(
+    x: np.ndarray,
+    y: np.ndarray,
+    qx: np.ndarray,
+    qy: np.ndarray,
+    k_p: float,
+    v_max: float,
+    standoff_m: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Coverage neighbour model, Eq. 20: ``ⁱu_j^est = −K_p (ⁱp_j − ⁱq_m)``, saturated.
+
+    Two documented additions: the input is scaled down to norm ``v_max`` where it is
+    larger (the robots cannot go faster), and with ``standoff_m = ρ > 0`` the pull stops
+    at distance ρ from q_m: ``u = −K_p (1 − ρ/‖p − q_m‖)₊ (p − q_m)`` (coverage robots
+    spread around the peak instead of converging on it; with ρ = 0 this is Eq. 20).
+
+    Args:
+        x, y: ``(...)`` particle positions in Σ_i (m).
+        qx, qy: q_m in Σ_i (m), broadcast against ``x``.
+        k_p: K_p (1/s).
+        v_max: speed limit (m/s).
+        standoff_m: ρ ≥ 0 (m).
+
+    Returns:
+        ``(ux, uy)`` velocities in Σ_i (m/s), each shaped like ``x``.
+    """
+    ex = x - qx
+    ey = y - qy
+    r = np.sqrt(ex * ex + ey * ey)
+    # ‖u‖ = min(K_p (r − ρ)₊, v_max), direction −(p − q_m)/r
+    speed = np.minimum(np.maximum(k_p * (r - standoff_m), 0.0), v_max)
+    f = speed / np.maximum(r, 1e-300)
+    return -f * ex, -f * ey
+
+
+def crossing_input(x: np.ndarray, y: np.ndarray, v_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """Worst-case neighbour model, Eq. 22: ``−(v_max / 2) ⁱp_j / ‖ⁱp_j‖`` (towards robot i).
+
+    A particle exactly at the origin gets zero input (no direction).
+
+    Args:
+        x, y: ``(...)`` particle positions in Σ_i (m).
+        v_max: speed limit (m/s).
+
+    Returns:
+        ``(ux, uy)`` in Σ_i (m/s).
+    """
+    r = np.sqrt(x * x + y * y)
+    s = -0.5 * v_max / np.maximum(r, 1e-9)
+    return s * x, s * y
+
+
+def own_motion(
+    pose_prev_world: np.ndarray,
+    v_body: np.ndarray,
+    omega: np.ndarray,
+    dt: float,
+    lo_m: float | None = None,
+    hi_m: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Own motion of Σ_i over one step, as the env integrates it (Eq. 2, ego part).
+
+    Exact unicycle integration of the constant body input (the env's
+    :func:`fov_marl.geometry.integrate_unicycle`), then the position clamp to
+    ``[lo_m, hi_m]^2`` (the arena shrunk by one robot radius), when given.
+
+    Args:
+        pose_prev_world: ``(R, 3)`` world pose at the start of the step.
+        v_body: ``(R, 2)`` body velocity (m/s).
+        omega: ``(R,)`` yaw rate (rad/s).
+        dt: step (s).
+        lo_m, hi_m: clamp bounds (m), or ``None`` for no clamp.
+
+    Returns:
+        ``(d_body (R, 2), dyaw (R,))``: the displacement of the origin of Σ_i expressed in
+        the *old* Σ_i (m), and the yaw change (rad).
+    """
+    new = integrate_unicycle(pose_prev_world, v_body, omega, dt)
+    if lo_m is not None and hi_m is not None:
+        new[:, :2] = np.clip(new[:, :2], lo_m, hi_m)
+    d_body = world_to_body(new[:, :2], pose_prev_world)
+    return d_body, np.asarray(omega, dtype=np.float64) * dt
+
+
+def to_new_body_frame(
+    x: np.ndarray,
+    y: np.ndarray,
+    h: np.ndarray,
+    d_x: np.ndarray,
+    d_y: np.ndarray,
+    dyaw: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Re-express particles after Σ_i moved by ``(d, dyaw)`` (Eq. 2, inverse own motion).
+
+    ``ⁱp' = R(dyaw)ᵀ (ⁱp − d)`` and ``h' = wrap(h − dyaw)``.
+
+    Args:
+        x, y, h: ``(...)`` particles in the old Σ_i.
+        d_x, d_y, dyaw: displacement of Σ_i in the old Σ_i and yaw change, broadcast.
+
+    Returns:
+        ``(x', y', h')`` in the new Σ_i.
+    """
+    c, s = np.cos(dyaw), np.sin(dyaw)
+    xr = x - d_x
+    yr = y - d_y
+    return c * xr + s * yr, c * yr - s * xr, wrap(h - dyaw)
+
+
+def measurement_log_likelihood(
+    dx: np.ndarray, dy: np.ndarray, dh: np.ndarray, inv_var: tuple[float, float, float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Gaussian log-likelihood of a detection, Eq. 3, up to a constant.
+
+    ``log w = −½ (dx²/σx² + dy²/σy² + dh²/σθ²)`` with Σ_MEAS = diag(σx², σy², σθ²) (the
+    config's ``meas_cov_diag`` are variances) and ``dh`` the wrapped heading difference.
+
+    Args:
+        dx, dy: ``(...)`` particle minus measured position (m).
+        dh: ``(...)`` wrapped heading difference (rad).
+        inv_var: ``(1/σx², 1/σy², 1/σθ²)``.
+
+    Returns:
+        ``(log_w, maha_pos)``: the log-weights and the squared Mahalanobis distance of the
+        position part alone (used by the recovery gate).
+    """
+    maha_pos = dx * dx * inv_var[0] + dy * dy * inv_var[1]
+    return -0.5 * (maha_pos + dh * dh * inv_var[2]), maha_pos
+
+
+def deletion_mask(
+    x: np.ndarray, y: np.ndarray, detected: np.ndarray, fov_rad: float, range_m: float
+) -> np.ndarray:
+    """Particles deleted by Eq. 4: inside F_i while their neighbour is undetected.
+
+    Args:
+        x, y: ``(...)`` particle positions in Σ_i.
+        detected: ``(...)`` whether each particle's neighbour was detected.
+
+    Returns:
+        ``(...)`` boolean mask of particles whose weight is set to 0.
+    """
+    return ~detected & in_fov_xy(x, y, fov_rad, range_m)
+
+
+def weighted_moments(
+    x: np.ndarray,
+    y: np.ndarray,
+    w: np.ndarray,
+    block_of: np.ndarray,
+    block_start: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-block weighted mean and covariance (Eq. 5 and Section V's Gaussian fit).
+
+    Eq. 5 as printed, ``Σ_k w_k χ_k / w_k``, would be the plain sum of the particles; it
+    is read as the normalised weighted mean ``Σ_k w_k χ_k / Σ_k w_k``. The covariance is
+    the weighted (maximum-likelihood) one, ``Σ_k w_k (χ_k − μ)(χ_k − μ)ᵀ / Σ_k w_k``,
+    computed in two passes (centred) for accuracy.
+
+    Args:
+        x, y: ``(F,)`` positions; w: ``(F,)`` non-negative weights, positive sum per block.
+        block_of: ``(F,)`` block of each particle; block_start: ``(B,)``.
+
+    Returns:
+        ``(sum_w (B,), mean (B, 2), cov (B, 2, 2))``.
+    """
+    sw = np.add.reduceat(w, block_start)
+    wx = w * x
+    wy = w * y
+    mx = np.add.reduceat(wx, block_start) / sw
+    my = np.add.reduceat(wy, block_start) / sw
+    ex = x - mx[block_of]
+    ey = y - my[block_of]
+    wex = w * ex
+    cxx = np.add.reduceat(wex * ex, block_start) / sw
+    cxy = np.add.reduceat(wex * ey, block_start) / sw
+    cyy = np.add.reduceat(w * ey * ey, block_start) / sw
+    mean = np.stack([mx, my], -1)
+    cov = np.empty((sw.shape[0], 2, 2))
+    cov[:, 0, 0] = cxx
+    cov[:, 0, 1] = cxy
+    cov[:, 1, 0] = cxy
+    cov[:, 1, 1] = cyy
+    return sw, mean, cov
+
+
+def effective_sample_size(w: np.ndarray, block_start: np.ndarray) -> np.ndarray:
+    """Per-block effective sample size ``(Σ w)² / Σ w²`` (``(B,)``)."""
+    sw = np.add.reduceat(w, block_start)
+    sw2 = np.add.reduceat(w * w, block_start)
+    return sw * sw / sw2
+
+
+def equal_split(n_total: int, n_blocks: int) -> np.ndarray:
+    """``(n_blocks,)`` counts summing to ``n_total``, the extra ones to the first blocks."""
+    base, extra = divmod(int(n_total), int(n_blocks))
+    out = np.full(n_blocks, base, dtype=np.int64)
+    out[:extra] += 1
+    return out
+
+
+def allocate_budget(
+    d_m: np.ndarray, n_total: int, min_per_block: int, scale_m: float
+) -> np.ndarray:
+    """Split a fixed budget P_T across neighbours by importance (Section IV-B).
+
+    Importance is the distance d_ij to the neighbour's ellipse (Eq. 10, closer is more
+    important). Each neighbour first gets the floor ``f = min(min_per_block, P_T // M)``;
+    the rest, ``P_T − M f``, is split in proportion to ``w_j = 1 / (d_ij + scale_m)``
+    and rounded by largest remainder (ties: smaller d, then lower slot), so
+
+    * the counts sum to exactly P_T (the authors' integer division lost particles),
+    * every count is at least ``f ≥ 1``,
+    * a neighbour never gets fewer particles than one with a strictly larger d.
+
+    Args:
+        d_m: ``(R, M)`` distances d_ij ≥ 0 per robot and neighbour (m); non-finite
+            values are treated as very far.
+        n_total: P_T ≥ M.
+        min_per_block: requested floor ≥ 1.
+        scale_m: ``s > 0`` (m).
+
+    Returns:
+        ``(R, M)`` int64 counts, each row summing to ``n_total``.
+
+    Raises:
+        ValueError: ``n_total < M``, naming ``n_particles_total``.
+    """
+    d = np.asarray(d_m, dtype=np.float64)
+    n_rows, m = d.shape
+    if n_total < m:
+        raise ValueError(
+            f"n_particles_total must be >= the number of neighbours ({m}), got {n_total}"
+        )
+    if m == 0:
+        return np.zeros((n_rows, 0), dtype=np.int64)
+    d = np.where(np.isfinite(d), np.maximum(d, 0.0), 1e12)
+    f = min(int(min_per_block), int(n_total) // m)
+    w = 1.0 / (d + scale_m)
+    quota = f + (n_total - m * f) * (w / w.sum(axis=1, keepdims=True))
+    base = np.floor(quota)
+    frac = quota - base
+    counts = base.astype(np.int64)
+    rem = n_total - counts.sum(axis=1)
+    # np.lexsort is stable: equal (frac, d) keep ascending slot order.
+    order = np.lexsort((d, -frac), axis=-1)
+    counts[np.arange(n_rows)[:, None], order] += np.arange(m)[None, :] < rem[:, None]
+    return counts
+
+
+def systematic_resample_indices(
+    w: np.ndarray,
+    row_len: int,
+    block_of: np.ndarray,
+    block_start: np.ndarray,
+    block_len: np.ndarray,
+    n_new: np.ndarray,
+    u: np.ndarray,
+) -> np.ndarray:
+    """Systematic resampling of every block at once, each at its new size (IV-A 5, IV-B).
+
+    For a block with normalised cumulative weights ``C_k`` (``C_{−1} = 0``), new size
+    ``n`` and one uniform ``u ∈ [0, 1)``, particle k is copied
+    ``⌊n C_k + u⌋ − ⌊n C_{k−1} + u⌋`` times, i.e. once for each of the evenly spaced
+    points ``t_i = (i + 1 − u) / n``, i = 0..n−1, with ``C_{k−1} < t_i ≤ C_k``: the
+    systematic scheme (offset ``1 − u ∈ (0, 1]``). One cumulative sum runs along each row
+    (robot), and each block's sum is measured from its own start, so no block depends on
+    another.
+
+    Round-off guards: the last ``C_k`` of each block is exactly 1 (a number divided by
+    itself) and ``⌊n C_k + u⌋`` is capped at n (``n + u`` can round up to ``n + 1``), so
+    each block gets exactly ``n`` copies; zero-weight (deleted) particles never get one.
+    Re-drawing at a new size this way is the budget re-allocation's "resampling without
+    modifying the distribution".
+
+    Args:
+        w: ``(F,)`` weights ≥ 0 with a positive sum in every block, ``F = R row_len``.
+        row_len: particles per row (P_T).
+        block_of: ``(F,)``; block_start, block_len: ``(B,)``.
+        n_new: ``(B,)`` int new block sizes, each row summing to ``row_len``.
+        u: ``(B,)`` uniforms in [0, 1).
+
+    Returns:
+        ``(F,)`` int indices into the flat arrays; the new blocks are contiguous and in
+        the same block order.
+    """
+    f = w.shape[0]
+    cs = np.cumsum(w.reshape(-1, row_len), axis=1).reshape(f)
+    off = cs[block_start - 1]
+    off[block_start % row_len == 0] = 0.0
+    total = cs[block_start + block_len - 1] - off
+    c = cs - off[block_of]
+    c /= total[block_of]
+    np.maximum(c, 0.0, out=c)
+    n_p = n_new.astype(np.float64)[block_of]
+    c *= n_p
+    c += u[block_of]
+    fl = np.floor(c, out=c)
+    np.minimum(fl, n_p, out=fl)
+    prev = np.empty_like(fl)
+    prev[1:] = fl[:-1]
+    prev[block_start] = 0.0
+    fl -= prev
+    return np.repeat(np.arange(f), fl.astype(np.int64))

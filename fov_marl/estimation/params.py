@@ -1,0 +1,179 @@
+"""Parameters of the neighbour tracker (paper Section IV), validated on construction.
+
+Every choice the paper leaves open is a field here, with the reason for its default:
+
+=================================  ==========  ============================================
+field                              default     reason
+=================================  ==========  ============================================
+``n_particles_total``              2000        P_T, fixed budget per robot (authors: 10 000;
+                                               2000 is calibrated up to N = 12 in the tests
+                                               and costs ~0.3 ms per robot-step in a bank)
+``min_particles_per_neighbour``    20          floor of each P_j so a far neighbour keeps a
+                                               usable cloud; lowered to ``P_T // M`` when
+                                               ``M * floor > P_T``
+``allocation_scale_m``             2.0         importance w_j = 1 / (d_ij + s), s = D_s:
+                                               inside / touching ellipses weigh 1/s
+``motion_model``                   ``auto``    Eq. 20 for coverage, Eq. 22 for crossing
+``k_p``                            0.5         Eq. 20 gain (1/s), the authors' motion model
+``coverage_standoff_m``            ``None``    Eq. 20's pull stops this far from q_m; None:
+                                               R_s + D_s (8 m): coverage robots park around
+                                               the peak, not on it; 0 is the paper's law,
+                                               overconfident for long-unseen robots parked
+                                               off the peak (see the calibration tests)
+``process_noise_m_per_sqrt_s``     1.5         position random walk: per-step std
+                                               ``q sqrt(dt)`` per axis (0.67 m at dt 0.2 s;
+                                               the authors used 0.5 m per 0.25 s step, i.e.
+                                               1.0; 1.5 keeps long-unseen neighbours inside
+                                               their 95% ellipse, see the tests)
+``heading_noise_rad_per_sqrt_s``   0.7         relative-heading random walk (0.31 rad/step)
+``init_mode``                      ``auto``    known starts when given (Eq. 1, the paper's
+                                               assumption), else uniform over the arena
+``init_spread_m``                  0.1         std of the cloud around a known start
+``init_heading_spread_rad``        0.1         same for the heading
+``confidence``                     0.95        ellipse level (chi^2, 2 dof)
+``mc_error_factor``                15.0        kappa: the reported covariance is the
+                                               particle covariance times (1 + kappa/ESS),
+                                               adding the Monte Carlo error of the particle
+                                               mean (measured against an exact Kalman
+                                               filter: ~10-17 Sigma/ESS when resampling
+                                               every step); 0 reports the bare covariance
+``recovery_min_ess``               10.0        detected neighbour whose weighted set has an
+                                               effective size below ``min(this, P_j / 2)``
+                                               is re-seeded around the detection
+``recovery_gate_chi2``             27.63       ... as is one whose nearest particle is
+                                               farther than this squared Mahalanobis
+                                               distance (chi^2 2 dof, p = 1e-6)
+``ego_motion``                     ``action``  own motion from the applied action (Eq. 2);
+                                               ``pose``: from the own pose in consecutive
+                                               observations
+``clamp_to_arena``                 True        particles are clamped to the arena like robots
+``min_meas_var``                   1e-4        floor of Sigma_MEAS entries (noiseless
+                                               cameras still give a finite likelihood)
+=================================  ==========  ============================================
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+__all__ = ["TrackerParams", "MotionModel", "InitMode", "EgoMotion"]
+
+MotionModel = Literal["auto", "coverage", "crossing", "static"]
+InitMode = Literal["auto", "known", "uniform"]
+EgoMotion = Literal["action", "pose"]
+
+_MOTION_MODELS = ("auto", "coverage", "crossing", "static")
+_INIT_MODES = ("auto", "known", "uniform")
+_EGO_MOTIONS = ("action", "pose")
+
+
+def _real(name: str, value: Any, lo: float, hi: float | None, lo_open: bool, hi_open: bool = False):
+    allowed = (
+        f"{'(' if lo_open else '['}{lo}, {'inf' if hi is None else hi}{')' if hi_open else ']'}"
+    )
+    if isinstance(value, bool):
+        raise ValueError(f"{name} must be a real number in {allowed}, got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a real number in {allowed}, got {value!r}") from None
+    bad = (
+        not math.isfinite(v)
+        or v < lo
+        or (lo_open and v == lo)
+        or (hi is not None and (v > hi or (hi_open and v == hi)))
+    )
+    if bad:
+        raise ValueError(f"{name} must be in {allowed}, got {value!r}")
+
+
+def _integer(name: str, value: Any, lo: int, hi: int | None = None) -> None:
+    allowed = f"[{lo}, {'inf' if hi is None else hi}]"
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        raise ValueError(f"{name} must be an integer in {allowed}, got {value!r}")
+    if value < lo or (hi is not None and value > hi):
+        raise ValueError(f"{name} must be an integer in {allowed}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class TrackerParams:
+    """Parameters of one robot's particle-filter bank; see the module docstring.
+
+    Attributes:
+        n_particles_total: P_T, particles shared by all neighbours, in [1, 10_000_000];
+            must be at least the number of neighbours (checked by the tracker, which
+            knows N).
+        min_particles_per_neighbour: floor of each P_j, in [1, inf).
+        allocation_scale_m: s in the importance weight ``1 / (d_ij + s)``, in (0, inf) m.
+        motion_model: neighbour input u_j^est for the prediction (Eq. 2): ``"coverage"``
+            (Eq. 20), ``"crossing"`` (Eq. 22), ``"static"`` (zero input, noise only) or
+            ``"auto"`` (from ``config.scenario``).
+        k_p: gain K_p of Eq. 20, in [0, inf) 1/s.
+        coverage_standoff_m: ρ of :func:`~fov_marl.estimation.kernels.coverage_input`,
+            in [0, inf) m, or None for ``sensing_radius_m + safety_distance_m``.
+        process_noise_m_per_sqrt_s: position random-walk intensity q, in [0, inf); each
+            step adds N(0, q^2 dt) per axis.
+        heading_noise_rad_per_sqrt_s: heading random-walk intensity, in [0, inf).
+        init_mode: ``"known"`` (requires initial poses at reset), ``"uniform"``, or
+            ``"auto"`` (known when initial poses are given, else uniform).
+        init_spread_m: std of the known-start cloud per axis, in [0, inf) m.
+        init_heading_spread_rad: std of the known-start heading, in [0, inf) rad.
+        confidence: ellipse confidence level, in (0, 1).
+        mc_error_factor: κ ≥ 0 of the Monte Carlo inflation of the reported covariance.
+        recovery_min_ess: effective-sample-size threshold of the re-seed around a
+            detection, in [0, inf).
+        recovery_gate_chi2: squared-Mahalanobis gate of the re-seed, in (0, inf).
+        ego_motion: ``"action"`` or ``"pose"`` (how Σ_i's own motion is obtained).
+        clamp_to_arena: clamp particle positions to ``[r, L - r]^2`` like the env does.
+        min_meas_var: floor of each Σ_MEAS diagonal entry, in (0, inf).
+    """
+
+    n_particles_total: int = 2000
+    min_particles_per_neighbour: int = 20
+    allocation_scale_m: float = 2.0
+    motion_model: MotionModel = "auto"
+    k_p: float = 0.5
+    coverage_standoff_m: float | None = None
+    process_noise_m_per_sqrt_s: float = 1.5
+    heading_noise_rad_per_sqrt_s: float = 0.7
+    init_mode: InitMode = "auto"
+    init_spread_m: float = 0.1
+    init_heading_spread_rad: float = 0.1
+    confidence: float = 0.95
+    mc_error_factor: float = 15.0
+    recovery_min_ess: float = 10.0
+    recovery_gate_chi2: float = -2.0 * math.log(1e-6)
+    ego_motion: EgoMotion = "action"
+    clamp_to_arena: bool = True
+    min_meas_var: float = 1e-4
+
+    def __post_init__(self) -> None:
+        _integer("n_particles_total", self.n_particles_total, 1, 10_000_000)
+        _integer("min_particles_per_neighbour", self.min_particles_per_neighbour, 1)
+        _real("allocation_scale_m", self.allocation_scale_m, 0.0, None, lo_open=True)
+        if self.motion_model not in _MOTION_MODELS:
+            raise ValueError(
+                f"motion_model must be one of {_MOTION_MODELS}, got {self.motion_model!r}"
+            )
+        _real("k_p", self.k_p, 0.0, None, lo_open=False)
+        if self.coverage_standoff_m is not None:
+            _real("coverage_standoff_m", self.coverage_standoff_m, 0.0, None, lo_open=False)
+        _real("process_noise_m_per_sqrt_s", self.process_noise_m_per_sqrt_s, 0.0, None, False)
+        _real("heading_noise_rad_per_sqrt_s", self.heading_noise_rad_per_sqrt_s, 0.0, None, False)
+        if self.init_mode not in _INIT_MODES:
+            raise ValueError(f"init_mode must be one of {_INIT_MODES}, got {self.init_mode!r}")
+        _real("init_spread_m", self.init_spread_m, 0.0, None, lo_open=False)
+        _real("init_heading_spread_rad", self.init_heading_spread_rad, 0.0, None, lo_open=False)
+        _real("mc_error_factor", self.mc_error_factor, 0.0, None, lo_open=False)
+        _real("confidence", self.confidence, 0.0, 1.0, lo_open=True, hi_open=True)
+        _real("recovery_min_ess", self.recovery_min_ess, 0.0, None, lo_open=False)
+        _real("recovery_gate_chi2", self.recovery_gate_chi2, 0.0, None, lo_open=True)
+        if self.ego_motion not in _EGO_MOTIONS:
+            raise ValueError(f"ego_motion must be one of {_EGO_MOTIONS}, got {self.ego_motion!r}")
+        if not isinstance(self.clamp_to_arena, bool):
+            raise ValueError(f"clamp_to_arena must be a bool, got {self.clamp_to_arena!r}")
+        _real("min_meas_var", self.min_meas_var, 0.0, None, lo_open=True)

@@ -1,0 +1,933 @@
+"""Neighbour tracking with one particle filter per neighbour and a fixed budget (Section IV-V).
+
+:class:`TrackerBank` steps the trackers of several robots at once on one set of flat
+arrays (block = (robot, neighbour)); :class:`NeighborTracker` is a bank of one robot.
+Each robot uses only its own data: its applied action, its own observation (camera
+detections with IDs, its own pose and the mission cue) and its own ``Generator``.
+
+One step of robot i (:meth:`TrackerBank.step`), all neighbours at once, no loop over
+particles or neighbours (the only Python loops are over robots, for their own
+Generators, and over the rare re-seeded neighbours):
+
+1. prediction (Eq. 2): each particle moves by the neighbour model u_j^est (Eq. 20 in
+   coverage, saturated at v_max and with a standoff from q_m, see
+   :func:`~fov_marl.estimation.kernels.coverage_input`; Eq. 22 in crossing) plus
+   process noise, in the old Σ_i; then it is
+   re-expressed in the new Σ_i by the inverse of robot i's own motion (exact unicycle
+   integration of the applied action, with the env's arena clamp); positions are
+   clamped to the arena (known to every robot) and the relative heading takes a
+   random walk;
+2. weight (Eq. 3): Gaussian likelihood of the detection, in log space;
+3. deletion (Eq. 4): particles inside F_i of an undetected neighbour get weight 0;
+4. recovery (a documented addition): a neighbour whose particles were all deleted is
+   re-seeded uniformly over the arena outside F_i; a detected neighbour whose particles
+   miss the detection (nearest one beyond the χ² gate, or effective sample size below
+   ``min(recovery_min_ess, P_j / 2)``) is re-seeded from N(z, Σ_MEAS) (clamped to the
+   arena), the posterior when the prior is flat on the likelihood's scale. Both are
+   counted;
+5. estimate (Eq. 5, normalised weighted mean; Section V Gaussian fit): mean, covariance,
+   95% ellipse (Eq. 6-7) and the exact distance d_ij from robot i to it (replaces
+   Eq. 8-10). The reported covariance is the weighted particle covariance times
+   ``1 + κ / ESS`` (``mc_error_factor`` κ): the particle mean is itself a Monte Carlo
+   estimate, and its error, accumulated over steps by resampling every step, would
+   otherwise make the ellipse overconfident at P_j of a few hundred;
+6. budget re-allocation (Section IV-B) by ascending d_ij
+   (:func:`~fov_marl.estimation.kernels.allocate_budget`), then one systematic
+   resampling of each neighbour's weighted set at its new size: this single draw is
+   both the resampling step (IV-A 5) and the re-allocation's "another resampling step
+   ... without modifying the current probability distribution" (IV-B); drawing once
+   instead of twice gives the same distribution with less sampling noise.
+
+The estimate describes the weighted set of step 5; the particles returned by
+:meth:`TrackerBank.particles_body` are the resampled set of step 6 (same distribution).
+
+Random draws per robot and step, in this order: ``standard_normal((3, P_T))`` process
+noise; recovery draws, by ascending neighbour ID; ``random(M)`` resampling offsets.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+
+from fov_marl.config import ScenarioConfig
+from fov_marl.estimation import kernels as K
+from fov_marl.estimation.params import TrackerParams
+from fov_marl.geometry import chi2_2dof, confidence_ellipse, ellipse_distance, world_to_body
+from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, ObservationLayout, action_to_velocity
+
+__all__ = ["TrackerEstimate", "BankEstimate", "TrackerBank", "NeighborTracker"]
+
+
+@dataclass(frozen=True)
+class TrackerEstimate:
+    """What robot i believes about its M = N − 1 neighbours, ordered by ascending ID.
+
+    All positions in robot i's body frame Σ_i at the time of the last observation.
+    Arrays are read-only copies.
+
+    Attributes:
+        ids: ``(M,)`` int neighbour robot IDs.
+        mean_body: ``(M, 2)`` estimated ⁱp_j (m), Eq. 5 (normalised weighted mean).
+        cov_body: ``(M, 2, 2)`` weighted covariance (m²).
+        ellipse_a, ellipse_b: ``(M,)`` semi-axes (m) of the confidence ellipse, a ≥ b.
+        ellipse_psi: ``(M,)`` inclination of the major axis from the body x axis (rad).
+        ellipse_distance: ``(M,)`` exact distance from robot i (origin of Σ_i) to the
+            filled ellipse, 0 inside (m).
+        counts: ``(M,)`` particles now held per neighbour; sums to P_T.
+        detected: ``(M,)`` bool, detected in the last observation.
+        time_since_seen_s: ``(M,)`` seconds since the last detection (since the reset
+            when never detected).
+        velocity_est_body: ``(M, 2)`` the neighbour model u_j^est (Eq. 20 / Eq. 22)
+            evaluated at the mean, in Σ_i (m/s); zeros for the ``static`` model.
+        ess: ``(M,)`` effective sample size of the weighted set behind the estimate.
+        recovered: ``(M,)`` bool, re-seeded on the last update.
+        confidence: the ellipse's confidence level.
+        time_s: simulated seconds since the reset.
+    """
+
+    ids: np.ndarray
+    mean_body: np.ndarray
+    cov_body: np.ndarray
+    ellipse_a: np.ndarray
+    ellipse_b: np.ndarray
+    ellipse_psi: np.ndarray
+    ellipse_distance: np.ndarray
+    counts: np.ndarray
+    detected: np.ndarray
+    time_since_seen_s: np.ndarray
+    velocity_est_body: np.ndarray
+    ess: np.ndarray
+    recovered: np.ndarray
+    confidence: float
+    time_s: float
+
+
+@dataclass(frozen=True)
+class BankEstimate:
+    """The estimates of all robots of a bank: :class:`TrackerEstimate`'s array fields with a
+    leading robot axis ``(R, M, ...)``; ``agent_indices (R,)`` the robots, ``time_s``."""
+
+    agent_indices: np.ndarray
+    ids: np.ndarray
+    mean_body: np.ndarray
+    cov_body: np.ndarray
+    ellipse_a: np.ndarray
+    ellipse_b: np.ndarray
+    ellipse_psi: np.ndarray
+    ellipse_distance: np.ndarray
+    counts: np.ndarray
+    detected: np.ndarray
+    time_since_seen_s: np.ndarray
+    velocity_est_body: np.ndarray
+    ess: np.ndarray
+    recovered: np.ndarray
+    confidence: float
+    time_s: float
+
+    def robot(self, k: int) -> TrackerEstimate:
+        """The :class:`TrackerEstimate` of the bank's ``k``-th robot (row k)."""
+        kw = {}
+        for f in fields(TrackerEstimate):
+            v = getattr(self, f.name)
+            kw[f.name] = _ro(v[k]) if isinstance(v, np.ndarray) else v
+        return TrackerEstimate(**kw)
+
+
+def _ro(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, copy=True)
+    a.setflags(write=False)
+    return a
+
+
+def _resolve_agent(env: Any, agent: str | int) -> int:
+    agents = list(getattr(env, "possible_agents", []))
+    if isinstance(agent, int | np.integer) and not isinstance(agent, bool):
+        idx = int(agent)
+        if not 0 <= idx < max(len(agents), 1):
+            raise ValueError(f"agent must be in [0, {len(agents) - 1}], got {agent!r}")
+        return idx
+    if agent not in agents:
+        raise ValueError(f"agent must be one of {agents}, got {agent!r}")
+    return agents.index(agent)
+
+
+def _env_config(env: Any) -> ScenarioConfig:
+    cfg = getattr(env, "config", None)
+    if cfg is None and hasattr(env, "unwrapped"):
+        cfg = getattr(env.unwrapped, "config", None)
+    if not isinstance(cfg, ScenarioConfig):
+        raise ValueError(f"env must expose a ScenarioConfig as env.config, got {cfg!r}")
+    return cfg
+
+
+class _BankCore:
+    """The computation for a contiguous group of robots (rows); see :class:`TrackerBank`.
+
+    Inputs are validated by :class:`TrackerBank`; every array here has a leading row axis.
+    """
+
+    def __init__(
+        self,
+        config: ScenarioConfig,
+        params: TrackerParams,
+        agent_indices: np.ndarray,
+        rngs: list[np.random.Generator],
+    ) -> None:
+        n = config.n_agents
+        m = n - 1
+        self.config = config
+        self.params = params
+        self.agent_indices = agent_indices
+        self._rngs = rngs
+        self._R = agent_indices.size
+        self._M = m
+        self._P = int(params.n_particles_total)
+        lays = [ObservationLayout(n, int(a)) for a in agent_indices]
+        self._ids = np.stack([lay.neighbour_ids for lay in lays]).reshape(self._R, m)
+        model = params.motion_model
+        self._model = config.scenario if model == "auto" else model
+        self._chi2 = chi2_2dof(params.confidence)
+        var = np.maximum(np.asarray(config.meas_cov_diag, dtype=np.float64), params.min_meas_var)
+        self._meas_std = np.sqrt(var)
+        self._inv_var = tuple(float(v) for v in 1.0 / var)
+        r = config.robot_radius_m
+        self._lo, self._hi = r, config.arena_size_m - r
+        self._fov = config.fov_rad
+        self._range = config.detection_range_m
+        self._dt = config.dt_s
+        self._q_m = np.asarray(config.density_mean_m, dtype=np.float64)
+        rho = params.coverage_standoff_m
+        self._standoff = float(
+            config.sensing_radius_m + config.safety_distance_m if rho is None else rho
+        )
+        self._sig_p = params.process_noise_m_per_sqrt_s * math.sqrt(self._dt)
+        self._sig_h = params.heading_noise_rad_per_sqrt_s * math.sqrt(self._dt)
+        self._noise = np.empty((self._R, 3, self._P))
+        self._u = np.empty((self._R, m))
+        self._block_ids = np.arange(self._R * m)
+        self._origin = np.zeros(2)
+        self.initialised = False
+        self.n_recoveries_detection = np.zeros(self._R, dtype=np.int64)
+        self.n_recoveries_deleted = np.zeros(self._R, dtype=np.int64)
+
+    def _parse(self, obs: np.ndarray):
+        m, r = self._M, self._R
+        slots = obs[:, : SLOT_SIZE * m].reshape(r, m, SLOT_SIZE)
+        cue = obs[:, SLOT_SIZE * m : SLOT_SIZE * m + CUE_SIZE]
+        det = slots[..., 0] > 0.5
+        zx = slots[..., 1]
+        zy = slots[..., 2]
+        zh = np.arctan2(slots[..., 4], slots[..., 3])
+        pose = np.stack([cue[:, 0], cue[:, 1], np.arctan2(cue[:, 3], cue[:, 2])], -1)
+        if self.config.scenario == "coverage":
+            goal = cue[:, 4:6].copy()
+        else:
+            goal = world_to_body(self._q_m[None, :], pose)
+        return det, zx, zy, zh, pose, goal
+
+    def reset(self, obs_arr: np.ndarray, init: np.ndarray | None) -> None:
+        """Eq. 1 (``init`` (N, 3) known world poses, or None: uniform), then the first update."""
+        det, zx, zy, zh, pose, goal = self._parse(obs_arr)
+        R, M, P = self._R, self._M, self._P
+        self._counts = np.tile(K.equal_split(P, M), (R, 1)) if M else np.zeros((R, 0), np.int64)
+        self._set_blocks()
+        self._x = np.empty((R, P))
+        self._y = np.empty((R, P))
+        self._h = np.empty((R, P))
+        if M:
+            if init is not None:
+                rel = world_to_body(init[self._ids][..., :2], pose[:, None, :])  # (R, M, 2)
+                rel_h = K.wrap(init[self._ids][..., 2] - pose[:, None, 2])
+                gl = self._gid.reshape(R, P) - (np.arange(R) * M)[:, None]
+                for k, g in enumerate(self._rngs):
+                    nz = g.standard_normal((3, P))
+                    self._x[k] = rel[k, gl[k], 0] + self.params.init_spread_m * nz[0]
+                    self._y[k] = rel[k, gl[k], 1] + self.params.init_spread_m * nz[1]
+                    self._h[k] = K.wrap(
+                        rel_h[k, gl[k]] + self.params.init_heading_spread_rad * nz[2]
+                    )
+            else:
+                span = self._hi - self._lo
+                for k, g in enumerate(self._rngs):
+                    uu = g.random((3, P))
+                    wx = self._lo + span * uu[0]
+                    wy = self._lo + span * uu[1]
+                    b = world_to_body(np.stack([wx, wy], -1), pose[k])
+                    self._x[k] = b[:, 0]
+                    self._y[k] = b[:, 1]
+                    self._h[k] = 2.0 * math.pi * uu[2] - math.pi
+        self._tss = np.zeros((R, M))
+        self._time_s = 0.0
+        self.n_recoveries_detection[:] = 0
+        self.n_recoveries_deleted[:] = 0
+        self.initialised = True
+        self._update(det, zx, zy, zh, pose)
+        self._pose_prev = pose
+        self._goal_prev = goal
+
+    def _set_blocks(self) -> None:
+        c = self._counts.reshape(-1)
+        self._block_len = c
+        self._gid = np.repeat(self._block_ids, c)
+        starts = np.empty_like(c)
+        if c.size:
+            starts[0] = 0
+            np.cumsum(c[:-1], out=starts[1:])
+        self._starts = starts
+
+    def step(self, act: np.ndarray, obs_arr: np.ndarray) -> None:
+        """Predict (Eq. 2) with the rows' actions, then update with their observations."""
+        det, zx, zy, zh, pose, goal = self._parse(obs_arr)
+        if self._M:
+            self._predict(act, pose)
+        self._tss += self._dt
+        self._time_s += self._dt
+        self._update(det, zx, zy, zh, pose)
+        self._pose_prev = pose
+        self._goal_prev = goal
+
+    def _predict(self, act: np.ndarray, pose_now: np.ndarray) -> None:
+        """Eq. 2: neighbour model + process noise in the old Σ_i, then the inverse own motion."""
+        cfg, p = self.config, self.params
+        dt = self._dt
+        if p.ego_motion == "action":
+            v, om = action_to_velocity(act, cfg.v_max_mps, cfg.omega_max_radps)
+            d_body, dyaw = K.own_motion(self._pose_prev, v, om, dt, self._lo, self._hi)
+        else:
+            d_body = world_to_body(pose_now[:, :2], self._pose_prev)
+            dyaw = K.wrap(pose_now[:, 2] - self._pose_prev[:, 2])
+        for k, g in enumerate(self._rngs):
+            g.standard_normal(out=self._noise[k])
+        x, y, h = self._x, self._y, self._h
+        if self._model == "coverage":
+            q = self._goal_prev
+            ux, uy = K.coverage_input(
+                x, y, q[:, 0:1], q[:, 1:2], p.k_p, cfg.v_max_mps, self._standoff
+            )
+        elif self._model == "crossing":
+            ux, uy = K.crossing_input(x, y, cfg.v_max_mps)
+        else:
+            ux = uy = None
+        nz = self._noise
+        if ux is None:
+            xo = x + self._sig_p * nz[:, 0]
+            yo = y + self._sig_p * nz[:, 1]
+        else:
+            xo = x + dt * ux + self._sig_p * nz[:, 0]
+            yo = y + dt * uy + self._sig_p * nz[:, 1]
+        ho = h + self._sig_h * nz[:, 2]
+        x, y, h = K.to_new_body_frame(xo, yo, ho, d_body[:, 0:1], d_body[:, 1:2], dyaw[:, None])
+        if p.clamp_to_arena:
+            x, y = self._clamp(x, y, pose_now[:, 0:1], pose_now[:, 1:2], pose_now[:, 2:3])
+        self._x, self._y, self._h = x, y, h
+
+    def _clamp(self, x, y, px, py, yaw):
+        """Clamp body-frame positions to the arena ``[r, L − r]^2`` (via Σ_w, own pose)."""
+        c = np.cos(yaw)
+        s = np.sin(yaw)
+        lo, hi = self._lo, self._hi
+        wx = np.minimum(np.maximum(px + c * x - s * y, lo), hi) - px
+        wy = np.minimum(np.maximum(py + s * x + c * y, lo), hi) - py
+        return c * wx + s * wy, c * wy - s * wx
+
+    # ------------------------------------------------------------------ update
+    def _update(self, det, zx, zy, zh, pose) -> None:
+        """Eq. 3-5, recovery, Section V estimate, IV-B re-allocation and resampling."""
+        R, M, P = self._R, self._M, self._P
+        self._tss[det] = 0.0
+        self._det = det.copy()
+        if M == 0:
+            self._store_empty()
+            return
+        x = self._x.reshape(-1)
+        y = self._y.reshape(-1)
+        h = self._h.reshape(-1)
+        gid, starts, blen = self._gid, self._starts, self._block_len
+        det_f = det.reshape(-1)
+        det_p = det_f[gid]
+        if det_f.any():
+            dx = x - zx.reshape(-1)[gid]
+            dy = y - zy.reshape(-1)[gid]
+            dh = K.wrap(h - zh.reshape(-1)[gid])
+            lw_det, maha = K.measurement_log_likelihood(dx, dy, dh, self._inv_var)
+            lw = np.where(det_p, lw_det, 0.0)
+            maha_min = np.minimum.reduceat(maha, starts)
+        else:
+            lw = np.zeros(x.shape[0])
+            maha_min = np.zeros(R * M)
+        lw[K.deletion_mask(x, y, det_p, self._fov, self._range)] = -np.inf
+        lw_max = np.maximum.reduceat(lw, starts)
+        dead = lw_max == -np.inf
+        shift = np.where(dead, 0.0, lw_max)
+        w = np.exp(lw - shift[gid])
+        sw = np.add.reduceat(w, starts)
+        sw2 = np.add.reduceat(w * w, starts)
+        ess = np.divide(sw * sw, sw2, out=np.zeros_like(sw), where=~dead)
+        thr = np.minimum(self.params.recovery_min_ess, 0.5 * blen)
+        rec_det = det_f & ((maha_min > self.params.recovery_gate_chi2) | (ess < thr))
+        rec = rec_det | dead
+        if rec.any():
+            for b in np.flatnonzero(rec):
+                self._recover(b, bool(det_f[b]), x, y, h, w, zx, zy, zh, pose)
+            ess = np.where(rec, blen.astype(np.float64), ess)
+        sw, mean, cov = K.weighted_moments(x, y, w, gid, starts)
+        if self.params.mc_error_factor > 0.0:
+            cov *= (1.0 + self.params.mc_error_factor / ess)[:, None, None]
+        a, b, psi = confidence_ellipse(cov, self._chi2)
+        dist = ellipse_distance(self._origin, mean, a, b, psi)
+        mean_r = mean.reshape(R, M, 2)
+        d_r = dist.reshape(R, M)
+        counts = K.allocate_budget(
+            d_r, P, self.params.min_particles_per_neighbour, self.params.allocation_scale_m
+        )
+        for k, g in enumerate(self._rngs):
+            self._u[k] = g.random(M)
+        idx = K.systematic_resample_indices(
+            w, P, gid, starts, blen, counts.reshape(-1), self._u.reshape(-1)
+        )
+        self._x = x[idx].reshape(R, P)
+        self._y = y[idx].reshape(R, P)
+        self._h = h[idx].reshape(R, P)
+        self._counts = counts
+        self._set_blocks()
+        self._est = dict(
+            mean_body=mean_r,
+            cov_body=cov.reshape(R, M, 2, 2),
+            ellipse_a=a.reshape(R, M),
+            ellipse_b=b.reshape(R, M),
+            ellipse_psi=psi.reshape(R, M),
+            ellipse_distance=d_r,
+            ess=ess.reshape(R, M),
+            recovered=rec.reshape(R, M),
+        )
+
+    def _store_empty(self) -> None:
+        R = self._R
+        self._est = dict(
+            mean_body=np.zeros((R, 0, 2)),
+            cov_body=np.zeros((R, 0, 2, 2)),
+            ellipse_a=np.zeros((R, 0)),
+            ellipse_b=np.zeros((R, 0)),
+            ellipse_psi=np.zeros((R, 0)),
+            ellipse_distance=np.zeros((R, 0)),
+            ess=np.zeros((R, 0)),
+            recovered=np.zeros((R, 0), dtype=bool),
+        )
+
+    def _recover(self, b, detected, x, y, h, w, zx, zy, zh, pose) -> None:
+        """Re-seed block ``b`` in place (see module docstring, step 4); weights become 1."""
+        k, j = divmod(int(b), self._M)
+        g = self._rngs[k]
+        s = int(self._starts[b])
+        n = int(self._block_len[b])
+        e = s + n
+        if detected:
+            nz = g.standard_normal((3, n))
+            sd = self._meas_std
+            bx = zx[k, j] + sd[0] * nz[0]
+            by = zy[k, j] + sd[1] * nz[1]
+            if self.params.clamp_to_arena:
+                bx, by = self._clamp(bx, by, pose[k, 0], pose[k, 1], pose[k, 2])
+            x[s:e] = bx
+            y[s:e] = by
+            h[s:e] = K.wrap(zh[k, j] + sd[2] * nz[2])
+            self.n_recoveries_detection[k] += 1
+        else:
+            bx, by = self._uniform_outside_fov(g, n, pose[k])
+            x[s:e] = bx
+            y[s:e] = by
+            h[s:e] = 2.0 * math.pi * g.random(n) - math.pi
+            self.n_recoveries_deleted[k] += 1
+        w[s:e] = 1.0
+
+    def _uniform_outside_fov(self, g: np.random.Generator, n: int, pose: np.ndarray):
+        """``n`` points uniform over the arena ``[r, L − r]^2`` outside F_i, in Σ_i.
+
+        Rejection sampling; after 50 rounds (only when F_i covers nearly the whole arena)
+        the remaining points are taken from the last round regardless of F_i.
+        """
+        span = self._hi - self._lo
+        out_x = np.empty(n)
+        out_y = np.empty(n)
+        got = 0
+        for _ in range(50):
+            need = n - got
+            kk = max(2 * need, 16)
+            uu = g.random((2, kk))
+            b = world_to_body(
+                np.stack([self._lo + span * uu[0], self._lo + span * uu[1]], -1), pose
+            )
+            ok = ~K.in_fov_xy(b[:, 0], b[:, 1], self._fov, self._range)
+            bx, by = b[ok, 0][:need], b[ok, 1][:need]
+            out_x[got : got + bx.size] = bx
+            out_y[got : got + by.size] = by
+            got += bx.size
+            if got == n:
+                return out_x, out_y
+        out_x[got:] = b[: n - got, 0]
+        out_y[got:] = b[: n - got, 1]
+        return out_x, out_y
+
+    def _velocity_est(self) -> np.ndarray:
+        """``(R, M, 2)`` u_j^est (Eq. 20 / 22) at the means, in the current Σ_i."""
+        mean = self._est["mean_body"]
+        if self._M == 0 or self._model == "static":
+            return np.zeros(mean.shape)
+        if self._model == "coverage":
+            q = self._goal_prev
+            vx, vy = K.coverage_input(
+                mean[..., 0],
+                mean[..., 1],
+                q[:, 0:1],
+                q[:, 1:2],
+                self.params.k_p,
+                self.config.v_max_mps,
+                self._standoff,
+            )
+        else:
+            vx, vy = K.crossing_input(mean[..., 0], mean[..., 1], self.config.v_max_mps)
+        return np.stack([vx, vy], -1)
+
+    def estimate_arrays(self) -> dict:
+        """Per-row estimate arrays (not copied)."""
+        return dict(
+            velocity_est_body=self._velocity_est(),
+            ids=self._ids,
+            counts=self._counts,
+            detected=self._det,
+            time_since_seen_s=self._tss,
+            time_s=self._time_s,
+            **self._est,
+        )
+
+    def particles_body(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        p = np.stack([self._x[k], self._y[k]], -1)
+        local = self._gid.reshape(self._R, self._P)[k] - k * self._M
+        return p, self._ids[k][local]
+
+    def particle_headings(self, k: int) -> np.ndarray:
+        return self._h[k].copy()
+
+
+#: Robots per computation chunk are chosen so a chunk holds about this many particles:
+#: the per-particle temporaries then stay in cache (2x faster at P_T = 2000, N = 48).
+CHUNK_PARTICLES = 32768
+
+
+class TrackerBank:
+    """The particle-filter banks of several robots, stepped together (see module docstring).
+
+    Robot ``k`` of the bank (row k) is robot ``agent_indices[k]`` of the team and draws
+    only from ``rngs[k]``; its numbers are bit-identical to a :class:`NeighborTracker` of
+    that robot with the same Generator. Internally the robots are processed in chunks of
+    about :data:`CHUNK_PARTICLES` particles (one flat array per chunk, owner = (robot,
+    neighbour)); chunking changes no number.
+
+    Args:
+        config: the scenario.
+        params: tracker parameters (default :class:`TrackerParams()`).
+        agent_indices: team indices of the robots in the bank (default: all N, in order).
+        rngs: one ``np.random.Generator`` per robot of the bank. Default: spawned from
+            ``np.random.SeedSequence(seed)``, child ``k`` for row ``k``.
+        seed: used only when ``rngs`` is None.
+
+    Raises:
+        ValueError: bad ``config``, ``params``, ``agent_indices``, ``rngs``, or
+            ``n_particles_total < N − 1``.
+    """
+
+    def __init__(
+        self,
+        config: ScenarioConfig,
+        params: TrackerParams | None = None,
+        *,
+        agent_indices: Sequence[int] | None = None,
+        rngs: Sequence[np.random.Generator] | None = None,
+        seed: int | None = None,
+    ) -> None:
+        if not isinstance(config, ScenarioConfig):
+            raise ValueError(f"config must be a ScenarioConfig, got {type(config).__name__}")
+        params = TrackerParams() if params is None else params
+        if not isinstance(params, TrackerParams):
+            raise ValueError(f"params must be a TrackerParams, got {type(params).__name__}")
+        n = config.n_agents
+        if agent_indices is None:
+            agent_indices = range(n)
+        idx = np.asarray(list(agent_indices))
+        if idx.ndim != 1 or idx.size == 0 or not np.issubdtype(idx.dtype, np.integer):
+            raise ValueError(f"agent_indices must be a non-empty sequence of ints, got {idx!r}")
+        if np.any((idx < 0) | (idx >= n)) or np.unique(idx).size != idx.size:
+            raise ValueError(
+                f"agent_indices must be distinct robot indices in [0, {n - 1}], got {idx.tolist()}"
+            )
+        if rngs is None:
+            rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(idx.size)]
+        rngs = list(rngs)
+        if len(rngs) != idx.size or not all(isinstance(g, np.random.Generator) for g in rngs):
+            raise ValueError(
+                f"rngs must be {idx.size} np.random.Generator objects (one per robot), "
+                f"got {len(rngs)} objects"
+            )
+        m = n - 1
+        if params.n_particles_total < m:
+            raise ValueError(
+                f"n_particles_total must be >= the number of neighbours N - 1 = {m}, "
+                f"got {params.n_particles_total}"
+            )
+        self.config = config
+        self.params = params
+        self.agent_indices = idx.astype(np.int64)
+        self._R = idx.size
+        self._M = m
+        self._P = int(params.n_particles_total)
+        self._obs_size = SLOT_SIZE * m + CUE_SIZE
+        per = max(1, CHUNK_PARTICLES // self._P)
+        self._bounds = [(s, min(s + per, self._R)) for s in range(0, self._R, per)]
+        self._cores = [
+            _BankCore(config, params, self.agent_indices[s:e], rngs[s:e]) for s, e in self._bounds
+        ]
+        self._initialised = False
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def for_env(
+        cls,
+        env: Any,
+        seed: int | None = 0,
+        agents: Sequence[str | int] | None = None,
+        **param_overrides: Any,
+    ) -> TrackerBank:
+        """Bank for the robots ``agents`` (default all) of a PettingZoo env with ``.config``.
+
+        Robot k's Generator is ``default_rng(SeedSequence(seed).spawn(R)[k])``.
+        ``param_overrides`` are fields of :class:`TrackerParams`.
+        """
+        cfg = _env_config(env)
+        if agents is None:
+            idx = list(range(cfg.n_agents))
+        else:
+            idx = [_resolve_agent(env, a) for a in agents]
+        return cls(cfg, _params(param_overrides), agent_indices=idx, seed=seed)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def n_robots(self) -> int:
+        """Robots in the bank, R."""
+        return self._R
+
+    @property
+    def n_neighbours(self) -> int:
+        """Neighbours per robot, M = N − 1."""
+        return self._M
+
+    @property
+    def neighbour_ids(self) -> np.ndarray:
+        """``(R, M)`` neighbour IDs per robot (ascending)."""
+        return np.concatenate([c._ids for c in self._cores])
+
+    @property
+    def n_recoveries_detection(self) -> np.ndarray:
+        """``(R,)`` re-seeds around a detection the particles missed, per robot."""
+        return np.concatenate([c.n_recoveries_detection for c in self._cores])
+
+    @property
+    def n_recoveries_deleted(self) -> np.ndarray:
+        """``(R,)`` re-seeds after every particle was deleted inside F_i, per robot."""
+        return np.concatenate([c.n_recoveries_deleted for c in self._cores])
+
+    @property
+    def n_recoveries(self) -> np.ndarray:
+        """``(R,)`` re-seeds so far per robot (both kinds)."""
+        return self.n_recoveries_detection + self.n_recoveries_deleted
+
+    @property
+    def initialised(self) -> bool:
+        """Whether :meth:`reset` (explicit or implicit) has run."""
+        return self._initialised
+
+    # ------------------------------------------------------------------ input checks
+    def _obs_array(self, obs: Any, name: str = "obs") -> np.ndarray:
+        if isinstance(obs, Mapping):
+            rows = []
+            for a in self.agent_indices:
+                key = f"robot_{a}"
+                if key not in obs:
+                    raise ValueError(f"{name} must hold an observation for {key!r}")
+                rows.append(np.asarray(obs[key]))
+            try:
+                arr = np.stack(rows).astype(np.float64)
+            except ValueError:
+                raise ValueError(
+                    f"{name}: every observation must have shape ({self._obs_size},)"
+                ) from None
+        else:
+            try:
+                arr = np.asarray(obs, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(f"{name} must be a numeric array, got {obs!r}") from None
+        if arr.shape != (self._R, self._obs_size):
+            raise ValueError(
+                f"{name} must have shape (n_robots, obs_size) = ({self._R}, {self._obs_size}), "
+                f"got {arr.shape}"
+            )
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} must be finite, got NaN or inf")
+        return arr
+
+    def _action_array(self, actions: Any, name: str = "actions") -> np.ndarray:
+        if isinstance(actions, Mapping):
+            rows = []
+            for a in self.agent_indices:
+                key = f"robot_{a}"
+                if key not in actions:
+                    raise ValueError(f"{name} must hold an action for {key!r}")
+                rows.append(np.asarray(actions[key], dtype=np.float64).reshape(-1))
+            try:
+                arr = np.stack(rows)
+            except ValueError:
+                raise ValueError(f"{name}: every action must have shape (3,)") from None
+        else:
+            try:
+                arr = np.asarray(actions, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(f"{name} must be a numeric array, got {actions!r}") from None
+        if arr.shape != (self._R, 3):
+            raise ValueError(
+                f"{name} must have shape (n_robots, 3) = ({self._R}, 3), got {arr.shape}"
+            )
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} must be finite, got NaN or inf")
+        return arr
+
+    # ------------------------------------------------------------------ reset / step
+    def reset(self, obs: Any, initial_poses_world: np.ndarray | None = None) -> None:
+        """Initialise every filter (Eq. 1) and absorb the first observation.
+
+        Args:
+            obs: ``(R, obs_size)`` array, or a mapping ``"robot_<i>" -> (obs_size,)``.
+            initial_poses_world: ``(N, 3)`` known world start poses of the whole team
+                (the paper's assumption): each neighbour's particles start at its
+                relative pose plus N(0, init_spread²). ``None``: uniform over the arena
+                (and the first update deletes those inside F_i). ``init_mode`` can force
+                either.
+
+        Raises:
+            ValueError: bad shapes or non-finite values (naming the argument);
+                ``init_mode="known"`` without ``initial_poses_world``.
+        """
+        obs_arr = self._obs_array(obs)
+        mode = self.params.init_mode
+        known = initial_poses_world is not None if mode == "auto" else mode == "known"
+        init = None
+        if known:
+            if initial_poses_world is None:
+                raise ValueError("initial_poses_world is required when init_mode='known'")
+            init = np.asarray(initial_poses_world, dtype=np.float64)
+            n = self.config.n_agents
+            if init.shape != (n, 3):
+                raise ValueError(
+                    f"initial_poses_world must have shape (n_agents, 3) = ({n}, 3), "
+                    f"got {init.shape}"
+                )
+            if not np.all(np.isfinite(init)):
+                raise ValueError("initial_poses_world must be finite, got NaN or inf")
+        for core, (s, e) in zip(self._cores, self._bounds, strict=True):
+            core.reset(obs_arr[s:e], init)
+        self._initialised = True
+
+    def step(self, actions: Any, obs: Any) -> None:
+        """One filter step of every robot: predict, weight, delete, resample, re-allocate.
+
+        Args:
+            actions: ``(R, 3)`` normalised actions each robot applied on the step that
+                produced ``obs`` (mapped with :func:`fov_marl.spaces.action_to_velocity`,
+                which clips like the env), or a mapping ``"robot_<i>" -> (3,)``.
+            obs: the observations that step produced, as in :meth:`reset`.
+
+        Before the first :meth:`reset`, this resets with ``obs`` (uniform or per
+        ``init_mode``) and ignores ``actions``.
+
+        Raises:
+            ValueError: bad shapes or non-finite values, naming the argument.
+        """
+        act = self._action_array(actions)
+        obs_arr = self._obs_array(obs)
+        if not self._initialised:
+            self.reset(obs_arr)
+            return
+        for core, (s, e) in zip(self._cores, self._bounds, strict=True):
+            core.step(act[s:e], obs_arr[s:e])
+
+    # ------------------------------------------------------------------ outputs
+    def _check_init(self) -> None:
+        if not self._initialised:
+            raise ValueError("the tracker has no estimate yet: call reset(obs) or step() first")
+
+    def estimate(self) -> BankEstimate:
+        """All robots' estimates (copies); ``.robot(k)`` gives one :class:`TrackerEstimate`."""
+        self._check_init()
+        parts = [c.estimate_arrays() for c in self._cores]
+        arrays = {k: _ro(np.concatenate([p[k] for p in parts])) for k in parts[0] if k != "time_s"}
+        return BankEstimate(
+            agent_indices=_ro(self.agent_indices),
+            confidence=float(self.params.confidence),
+            time_s=float(parts[0]["time_s"]),
+            **arrays,
+        )
+
+    def _locate(self, k: int) -> tuple[_BankCore, int]:
+        self._check_init()
+        if isinstance(k, bool) or not isinstance(k, int | np.integer) or not 0 <= k < self._R:
+            raise ValueError(f"k must be an int in [0, {self._R - 1}], got {k!r}")
+        for core, (s, e) in zip(self._cores, self._bounds, strict=True):
+            if s <= k < e:
+                return core, int(k) - s
+        raise AssertionError("unreachable")  # pragma: no cover
+
+    def particles_body(self, k: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Particles of the bank's ``k``-th robot, for drawing.
+
+        Returns:
+            ``(p_body (P_T, 2) m in Σ_i, owner (P_T,) int neighbour ID)``, flat, sorted by
+            owner; copies.
+        """
+        core, j = self._locate(k)
+        return core.particles_body(j)
+
+    def particle_headings(self, k: int = 0) -> np.ndarray:
+        """``(P_T,)`` relative headings θ_j − θ_i (rad) of the ``k``-th robot's particles."""
+        core, j = self._locate(k)
+        return core.particle_headings(j)
+
+
+def _params(overrides: Mapping[str, Any], base: TrackerParams | None = None) -> TrackerParams:
+    valid = {f.name for f in fields(TrackerParams)}
+    unknown = sorted(set(overrides) - valid)
+    if unknown:
+        raise ValueError(f"unknown TrackerParams field(s) {unknown}; valid: {sorted(valid)}")
+    return replace(base or TrackerParams(), **overrides)
+
+
+class NeighborTracker:
+    """One robot's particle-filter bank: a :class:`TrackerBank` of that robot alone.
+
+    Args:
+        config: the scenario.
+        agent_index: robot i's index in the team.
+        params: tracker parameters (default :class:`TrackerParams()`).
+        rng: this robot's Generator (default ``np.random.default_rng()``, unseeded).
+
+    Example::
+
+        tracker = NeighborTracker.for_env(env, agent="robot_0", seed=0)
+        tracker.reset(obs["robot_0"], initial_poses_world=env.poses)
+        tracker.step(actions["robot_0"], obs["robot_0"])
+        est = tracker.estimate()
+    """
+
+    def __init__(
+        self,
+        config: ScenarioConfig,
+        agent_index: int = 0,
+        params: TrackerParams | None = None,
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        if isinstance(agent_index, bool) or not isinstance(agent_index, int | np.integer):
+            raise ValueError(f"agent_index must be an int, got {agent_index!r}")
+        if rng is None:
+            rng = np.random.default_rng()
+        if not isinstance(rng, np.random.Generator):
+            raise ValueError(f"rng must be a np.random.Generator, got {type(rng).__name__}")
+        self._bank = TrackerBank(config, params, agent_indices=[int(agent_index)], rngs=[rng])
+        self.agent_index = int(agent_index)
+        self._obs_size = self._bank._obs_size
+
+    @classmethod
+    def for_env(
+        cls, env: Any, agent: str | int = "robot_0", seed: int | None = 0, **param_overrides: Any
+    ) -> NeighborTracker:
+        """Tracker of ``agent`` for a PettingZoo env exposing ``.config`` and
+        ``.possible_agents``; ``rng = default_rng(seed)``; ``param_overrides`` are
+        :class:`TrackerParams` fields."""
+        cfg = _env_config(env)
+        idx = _resolve_agent(env, agent)
+        return cls(cfg, idx, _params(param_overrides), np.random.default_rng(seed))
+
+    @property
+    def config(self) -> ScenarioConfig:
+        return self._bank.config
+
+    @property
+    def params(self) -> TrackerParams:
+        return self._bank.params
+
+    @property
+    def neighbour_ids(self) -> np.ndarray:
+        """``(M,)`` neighbour IDs, ascending."""
+        return self._bank.neighbour_ids[0]
+
+    @property
+    def n_recoveries(self) -> int:
+        """Re-seeds so far (both kinds)."""
+        return int(self._bank.n_recoveries[0])
+
+    @property
+    def n_recoveries_detection(self) -> int:
+        """Re-seeds around a detection the particles missed."""
+        return int(self._bank.n_recoveries_detection[0])
+
+    @property
+    def n_recoveries_deleted(self) -> int:
+        """Re-seeds after every particle was deleted inside F_i."""
+        return int(self._bank.n_recoveries_deleted[0])
+
+    @property
+    def initialised(self) -> bool:
+        return self._bank.initialised
+
+    def _obs(self, obs: Any) -> np.ndarray:
+        try:
+            arr = np.asarray(obs, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"obs must be a numeric array, got {obs!r}") from None
+        if arr.shape != (self._obs_size,):
+            raise ValueError(
+                f"obs of robot_{self.agent_index} must have shape ({self._obs_size},), "
+                f"got {arr.shape}"
+            )
+        return arr[None]
+
+    def reset(self, obs: np.ndarray, initial_poses_world: np.ndarray | None = None) -> None:
+        """Initialise (Eq. 1) from this robot's first observation; see
+        :meth:`TrackerBank.reset`."""
+        self._bank.reset(self._obs(obs), initial_poses_world)
+
+    def step(self, own_action: np.ndarray, obs: np.ndarray) -> None:
+        """One filter step; ``own_action`` ``(3,)`` normalised, ``obs`` ``(obs_size,)``.
+        See :meth:`TrackerBank.step`."""
+        try:
+            act = np.asarray(own_action, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"own_action must be a numeric array, got {own_action!r}") from None
+        if act.shape != (3,):
+            raise ValueError(f"own_action must have shape (3,), got {act.shape}")
+        if not np.all(np.isfinite(act)):
+            raise ValueError("own_action must be finite, got NaN or inf")
+        self._bank.step(act[None], self._obs(obs))
+
+    def estimate(self) -> TrackerEstimate:
+        """The current :class:`TrackerEstimate`."""
+        return self._bank.estimate().robot(0)
+
+    def particles_body(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(p_body (P_T, 2), owner (P_T,) neighbour ID)``; see :meth:`TrackerBank.particles_body`."""
+        return self._bank.particles_body(0)
+
+    def particle_headings(self) -> np.ndarray:
+        """``(P_T,)`` relative headings of the particles (rad)."""
+        return self._bank.particle_headings(0)

@@ -1,0 +1,716 @@
+"""Train shared-parameter coverage policies with stable-baselines3; save, reload, act.
+
+>>> from fov_marl.training import train, load_policy
+>>> path = train("ppo", timesteps=200_000, seed=0, out_dir="runs/ppo")   # runs/ppo/model.zip
+>>> policy = load_policy(path)              # reset(seed) / act(obs dict) like a baseline
+>>> env = policy.make_env()                 # the scenario and wrappers it was trained with
+
+One network is shared by every robot (:mod:`fov_marl.training.vec_env`: each agent of
+each env copy is one VecEnv slot), and each robot acts on its own observation only:
+training is centralised in data, execution is decentralised.
+
+Timesteps
+---------
+SB3 counts *samples*: one robot-step is one timestep, so ``timesteps = T`` is
+``T / n_agents`` env steps spread over ``n_envs`` copies (with N = 6 and 4 copies one
+vectorised step is 24 timesteps).
+
+Default hyper-parameters and why (override any with ``hyperparams={...}``)
+--------------------------------------------------------------------------
+=====================  =================  =================================================
+PPO                    default            reason
+=====================  =================  =================================================
+``n_envs``             4 copies           24 slots at N = 6: decorrelated samples, one
+                                          process (the env steps at ~2400 copy-steps/s, so
+                                          subprocesses would not pay on 2 cores)
+``n_steps``            256                rollout of 256 × 24 = 6144 samples; ~1/2 episode
+``batch_size``         512                12 minibatches per epoch
+``n_epochs``           10                 SB3 / rl-zoo default for continuous control
+``learning_rate``      3e-4               Adam default of PPO
+``gamma``              0.99               dt = 0.2 s: horizon 1/(1−γ) = 100 steps = 20 s,
+                                          the time a robot needs to cross ~half the arena;
+                                          rewards are dense (Δη every step)
+``gae_lambda``         0.95               standard bias/variance trade-off
+``ent_coef``           0.0                Gaussian policy; exploration from log-std
+``net_arch``           pi [64, 64],       observations are 32 numbers at N = 6 (57 with
+                       vf [64, 64], tanh  belief features); small MLPs train fastest on CPU
+``train_max_cycles``   500 (100 s)        shorter than the evaluation horizon (1000 steps):
+                                          more start configurations per sample; the task
+                                          is continuing, time-limit truncation bootstraps
+                                          (``TimeLimit.truncated``), so the policy learns
+                                          the infinite-horizon objective regardless
+``normalize``          obs + reward       ``VecNormalize`` (clip 10): observations mix
+                                          metres (up to 56 m) and flags; the running
+                                          statistics are saved as ``vecnormalize.pkl`` and
+                                          applied by :func:`load_policy`
+``torch_threads``      1                  tiny MLP: a second thread costs more in
+                                          synchronisation than it gains, and leaves the
+                                          other core to the simulator/OS
+=====================  =================  =================================================
+
+SAC (``algo="sac"``): ``learning_rate`` 3e-4, ``buffer_size`` 300 000, ``learning_starts``
+5 000, ``batch_size`` 256, ``gamma`` 0.99, ``tau`` 0.005, ``train_freq`` 1 vectorised
+step (24 samples), ``gradient_steps`` 2, ``net_arch`` [128, 128] (ReLU). SAC is supported
+but PPO is the recommended default on a CPU: with 24 slots SAC spends most of its
+time in gradient steps.
+
+Measured on the shared 2-core development machine (torch CPU, 1 thread)
+-----------------------------------------------------------------------
+Coverage, N = 6, β = 120°, PPO defaults: 5 000-7 800 samples/s (env ~0.4 ms per copy-step;
+1 M timesteps in ~3.5 min). After 1 M timesteps the deterministic policy ends 1000-step
+episodes at final η ≈ 0.99 with no collision (5 seeds; ``random``: η ≈ 0.29); after
+200 k it reaches η ≈ 0.99 but does not hold it. With belief features (P_T = 2000):
+~2 000 samples/s. ``tests/training/test_slow_training.py`` repeats the comparison.
+
+Outputs in ``out_dir``
+----------------------
+=========================  ==========================================================
+``model.zip``              the SB3 model (``PPO.load``/``SAC.load``)
+``vecnormalize.pkl``       observation/reward normalisation statistics
+``config.json``            algo, scenario, ``env_kwargs`` (every config field, evaluation
+                           horizon), ``train_env_config`` (as trained), wrappers,
+                           hyper-parameters, seed, timesteps, timing, versions
+``checkpoints/``           ``model_<t>_steps.zip`` + ``model_vecnormalize_<t>_steps.pkl``
+``tb/PPO_<k>/``            TensorBoard, one folder per run (``tensorboard --logdir
+                           out_dir/tb``)
+``progress.csv``           the same scalars as CSV
+=========================  ==========================================================
+
+Logged scalars: SB3's ``rollout/ep_rew_mean`` (per-robot episode return) and losses,
+plus, once per finished episode of each env copy, ``fov/team_return`` (sum over
+robots), ``fov/final_eta``, ``fov/collisions``, ``fov/safety_violations``,
+``fov/min_distance`` (episode), crossing: ``fov/arrived``; behind the safety filter
+``fov/filter_interventions`` (robot-steps where the filter changed the action, per
+episode and robot) and ``fov/filter_intervention_rate``.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import pickle
+import platform
+import sys
+import time
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import stable_baselines3
+import torch
+from stable_baselines3 import PPO, SAC
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
+from stable_baselines3.common.logger import (
+    CSVOutputFormat,
+    HumanOutputFormat,
+    Logger,
+    TensorBoardOutputFormat,
+)
+from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+from fov_marl.config import make_config
+from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
+from fov_marl.training.vec_env import ParallelEnvVecEnv
+
+__all__ = [
+    "ALGOS",
+    "SCENARIOS",
+    "DEFAULT_HYPERPARAMS",
+    "DEFAULT_TRAIN_MAX_CYCLES",
+    "DEFAULT_N_ENVS",
+    "build_env",
+    "make_training_vec_env",
+    "train",
+    "load_policy",
+    "LearnedPolicy",
+    "FovMetricsCallback",
+]
+
+ALGOS = {"ppo": PPO, "sac": SAC}
+SCENARIOS = {"coverage": fov_coverage_v0, "crossing": fov_crossing_v0}
+DEFAULT_N_ENVS = 4
+DEFAULT_TRAIN_MAX_CYCLES = 500
+CONFIG_FORMAT = "fov_marl.training/1"
+
+DEFAULT_HYPERPARAMS: dict[str, dict[str, Any]] = {
+    "ppo": {
+        "learning_rate": 3e-4,
+        "n_steps": 256,
+        "batch_size": 512,
+        "n_epochs": 10,
+        "gamma": 0.99,
+        "gae_lambda": 0.95,
+        "clip_range": 0.2,
+        "ent_coef": 0.0,
+        "vf_coef": 0.5,
+        "max_grad_norm": 0.5,
+        "policy_kwargs": {
+            "net_arch": {"pi": [64, 64], "vf": [64, 64]},
+            "activation_fn": "tanh",
+        },
+    },
+    "sac": {
+        "learning_rate": 3e-4,
+        "buffer_size": 300_000,
+        "learning_starts": 5_000,
+        "batch_size": 256,
+        "tau": 0.005,
+        "gamma": 0.99,
+        "train_freq": 1,
+        "gradient_steps": 2,
+        "policy_kwargs": {"net_arch": [128, 128], "activation_fn": "relu"},
+    },
+}
+
+_ACTIVATIONS = {
+    "tanh": torch.nn.Tanh,
+    "relu": torch.nn.ReLU,
+    "elu": torch.nn.ELU,
+    "leaky_relu": torch.nn.LeakyReLU,
+}
+
+
+# ---------------------------------------------------------------- env building
+def build_env(
+    scenario: str = "coverage",
+    env_kwargs: dict[str, Any] | None = None,
+    *,
+    safety_filter: bool = False,
+    safety_filter_kwargs: dict[str, Any] | None = None,
+    belief: bool = False,
+    belief_kwargs: dict[str, Any] | None = None,
+    render_mode: str | None = None,
+) -> Any:
+    """A scenario's ParallelEnv with the training wrappers, innermost first.
+
+    Order: env -> :class:`~fov_marl.wrappers.SafetyFilterWrapper` (if ``safety_filter``)
+    -> :class:`~fov_marl.wrappers.belief.BeliefObservationWrapper` (if ``belief``). The
+    belief wrapper is outermost so the safety filter keeps receiving the env's own
+    observation layout.
+
+    Raises:
+        ValueError: unknown scenario, or an invalid config keyword/value.
+    """
+    if scenario not in SCENARIOS:
+        raise ValueError(f"scenario must be one of {sorted(SCENARIOS)}, got {scenario!r}")
+    env = SCENARIOS[scenario].parallel_env(render_mode=render_mode, **(env_kwargs or {}))
+    if safety_filter:
+        from fov_marl.wrappers import SafetyFilterWrapper
+
+        env = SafetyFilterWrapper(env, **(safety_filter_kwargs or {}))
+    if belief:
+        from fov_marl.wrappers.belief import BeliefObservationWrapper
+
+        env = BeliefObservationWrapper(env, **(belief_kwargs or {}))
+    return env
+
+
+def make_training_vec_env(
+    n_envs: int,
+    env_factory: Callable[[], Any],
+    *,
+    normalize: bool = True,
+    gamma: float = 0.99,
+) -> tuple[ParallelEnvVecEnv, Any]:
+    """``(adapter, vec_env)``: the adapter, then ``VecMonitor`` and optionally ``VecNormalize``."""
+    if isinstance(n_envs, bool) or not isinstance(n_envs, int | np.integer) or n_envs < 1:
+        raise ValueError(f"n_envs must be an integer in [1, inf), got {n_envs!r}")
+    adapter = ParallelEnvVecEnv([env_factory for _ in range(int(n_envs))])
+    venv: Any = VecMonitor(adapter)
+    if normalize:
+        venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=gamma)
+    return adapter, venv
+
+
+# ------------------------------------------------------------------- callback
+class FovMetricsCallback(BaseCallback):
+    """Log the env's episode metrics and safety-filter interventions (``fov/*``).
+
+    Reads the adapter's infos (see :mod:`fov_marl.training.vec_env`): when an env copy's
+    episode ends, its team metrics (identical in every slot of the copy) are logged once.
+    """
+
+    _METRICS = {
+        "eta": "final_eta",
+        "collisions_total": "collisions",
+        "safety_violations_total": "safety_violations",
+        "min_distance_episode": "min_distance",
+        "arrived_ever": "arrived",
+    }
+
+    def __init__(self, n_agents: int, verbose: int = 0) -> None:
+        super().__init__(verbose)
+        self.n_agents = n_agents
+        self.episodes = 0
+        self._interventions: dict[int, int] = {}
+        self._steps: dict[int, int] = {}
+        self.last_episode_metrics: dict[str, float] = {}
+
+    def _on_step(self) -> bool:
+        infos = self.locals.get("infos", [])
+        dones = self.locals.get("dones", np.zeros(len(infos), dtype=bool))
+        ended: dict[int, list[dict]] = {}
+        for info, done in zip(infos, dones, strict=True):
+            k = int(info.get("env_index", 0))
+            safety = info.get("safety")
+            if isinstance(safety, dict) and "intervened" in safety:
+                self._interventions[k] = self._interventions.get(k, 0) + int(
+                    bool(safety["intervened"])
+                )
+                self._steps[k] = self._steps.get(k, 0) + 1
+            if done:
+                ended.setdefault(k, []).append(info)
+        for k, slot_infos in ended.items():
+            self.episodes += 1
+            metrics = slot_infos[0].get("metrics", {})
+            out: dict[str, float] = {}
+            for key, name in self._METRICS.items():
+                if key in metrics:
+                    out[name] = float(metrics[key])
+            returns = [i["episode"]["r"] for i in slot_infos if "episode" in i]
+            if returns:
+                out["team_return"] = float(np.sum(returns))
+            if k in self._steps:
+                steps = max(self._steps.pop(k), 1)
+                n_int = self._interventions.pop(k, 0)
+                out["filter_interventions"] = n_int / self.n_agents
+                out["filter_intervention_rate"] = n_int / steps
+            for name, value in out.items():
+                self.logger.record_mean(f"fov/{name}", value)
+            self.last_episode_metrics = out
+        return True
+
+
+# ---------------------------------------------------------------- hyperparams
+def _merged_hyperparams(algo: str, overrides: dict[str, Any] | None) -> dict[str, Any]:
+    hp = copy.deepcopy(DEFAULT_HYPERPARAMS[algo])
+    for key, value in (overrides or {}).items():
+        if key == "policy_kwargs" and isinstance(value, dict):
+            hp["policy_kwargs"] = {**hp.get("policy_kwargs", {}), **value}
+        else:
+            hp[key] = value
+    return hp
+
+
+def _to_sb3_kwargs(hp: dict[str, Any]) -> dict[str, Any]:
+    kw = copy.deepcopy(hp)
+    pk = kw.get("policy_kwargs")
+    if pk and isinstance(pk.get("activation_fn"), str):
+        name = pk["activation_fn"]
+        if name not in _ACTIVATIONS:
+            raise ValueError(
+                f"policy_kwargs.activation_fn must be one of {sorted(_ACTIVATIONS)}, got {name!r}"
+            )
+        pk["activation_fn"] = _ACTIVATIONS[name]
+    return kw
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, type):
+        return x.__name__
+    return x
+
+
+def _next_run_dir(root: Path, prefix: str) -> Path:
+    """``root/<prefix>_<k>`` with the first unused k >= 1 (as SB3 names its runs)."""
+    k = 1
+    while (root / f"{prefix}_{k}").exists():
+        k += 1
+    return root / f"{prefix}_{k}"
+
+
+# ---------------------------------------------------------------------- train
+def train(
+    algo: str = "ppo",
+    scenario: str = "coverage",
+    *,
+    safety_filter: bool = False,
+    belief: bool = False,
+    timesteps: int = 1_000_000,
+    seed: int = 0,
+    out_dir: str | os.PathLike = "runs/train",
+    n_envs: int = DEFAULT_N_ENVS,
+    env_kwargs: dict[str, Any] | None = None,
+    hyperparams: dict[str, Any] | None = None,
+    train_max_cycles: int | None = DEFAULT_TRAIN_MAX_CYCLES,
+    normalize: bool = True,
+    checkpoint_every: int = 100_000,
+    progress_bar: bool = True,
+    torch_threads: int = 1,
+    safety_filter_kwargs: dict[str, Any] | None = None,
+    belief_kwargs: dict[str, Any] | None = None,
+    verbose: int = 0,
+) -> Path:
+    """Train one shared policy for all robots and save it; return ``out_dir/model.zip``.
+
+    Args:
+        algo: ``"ppo"`` or ``"sac"``.
+        scenario: ``"coverage"`` or ``"crossing"``.
+        safety_filter: train behind :class:`fov_marl.wrappers.SafetyFilterWrapper`.
+        belief: add :class:`fov_marl.wrappers.belief.BeliefObservationWrapper` features.
+        timesteps: robot-steps (samples) to train for, >= 1 (see module docstring).
+        seed: seeds SB3 (python, numpy, torch) and the env copies (copy k: seed + k).
+        out_dir: output folder (created; existing files are overwritten).
+        n_envs: env copies, >= 1.
+        env_kwargs: scenario config fields (:class:`fov_marl.config.ScenarioConfig`).
+        hyperparams: SB3 keyword overrides; ``policy_kwargs`` is merged with the default,
+            ``activation_fn`` given by name (``"tanh"``, ``"relu"``, ...).
+        train_max_cycles: episode length while training when ``env_kwargs`` has no
+            ``max_cycles``; ``None`` keeps the env's. The saved evaluation config keeps
+            the env's own horizon (default 1000 steps).
+        normalize: wrap in ``VecNormalize`` (observations and rewards).
+        checkpoint_every: save a checkpoint every this many timesteps (0: never).
+        progress_bar: show SB3's tqdm/rich progress bar.
+        torch_threads: ``torch.set_num_threads`` during training (restored after).
+        safety_filter_kwargs: keywords of ``SafetyFilterWrapper``.
+        belief_kwargs: keywords of ``BeliefObservationWrapper``.
+        verbose: SB3 verbosity (1 prints the log table to stdout).
+
+    Returns:
+        Path of the saved ``model.zip``. Ctrl-C stops training early and still saves
+        (``config.json`` then says ``"interrupted": true``).
+
+    Raises:
+        ValueError: unknown algo/scenario, bad numbers, invalid config fields.
+    """
+    if algo not in ALGOS:
+        raise ValueError(f"algo must be one of {sorted(ALGOS)}, got {algo!r}")
+    if scenario not in SCENARIOS:
+        raise ValueError(f"scenario must be one of {sorted(SCENARIOS)}, got {scenario!r}")
+    for name, value, lo in (
+        ("timesteps", timesteps, 1),
+        ("n_envs", n_envs, 1),
+        ("checkpoint_every", checkpoint_every, 0),
+        ("torch_threads", torch_threads, 1),
+        ("seed", seed, 0),
+    ):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < lo:
+            raise ValueError(f"{name} must be an integer in [{lo}, inf), got {value!r}")
+    if train_max_cycles is not None and (
+        isinstance(train_max_cycles, bool)
+        or not isinstance(train_max_cycles, int | np.integer)
+        or train_max_cycles < 1
+    ):
+        raise ValueError(
+            f"train_max_cycles must be None or an integer >= 1, got {train_max_cycles}"
+        )
+
+    env_kwargs = dict(env_kwargs or {})
+    train_kwargs = dict(env_kwargs)
+    if "max_cycles" not in env_kwargs and train_max_cycles is not None:
+        train_kwargs["max_cycles"] = int(train_max_cycles)
+    wrap = {
+        "safety_filter": bool(safety_filter),
+        "safety_filter_kwargs": dict(safety_filter_kwargs or {}),
+        "belief": bool(belief),
+        "belief_kwargs": dict(belief_kwargs or {}),
+    }
+    # Validate config fields and wrappers now, with a clear error, before SB3 starts.
+    probe = build_env(scenario, train_kwargs, **wrap)
+    train_config = probe.unwrapped.config
+    eval_config = train_config.replace(
+        max_cycles=env_kwargs.get("max_cycles", make_config(scenario=scenario).max_cycles)
+    )
+    n_agents = len(probe.possible_agents)
+    probe.close()
+
+    hp = _merged_hyperparams(algo, hyperparams)
+    sb3_kwargs = _to_sb3_kwargs(hp)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+
+    prev_threads = torch.get_num_threads()
+    torch.set_num_threads(int(torch_threads))
+    try:
+
+        def factory() -> Any:
+            return build_env(scenario, train_kwargs, **wrap)
+
+        _, venv = make_training_vec_env(
+            int(n_envs), factory, normalize=normalize, gamma=float(hp.get("gamma", 0.99))
+        )
+        model: BaseAlgorithm = ALGOS[algo](
+            "MlpPolicy", venv, seed=int(seed), device="cpu", verbose=verbose, **sb3_kwargs
+        )
+        formats: list[Any] = [
+            TensorBoardOutputFormat(str(_next_run_dir(out / "tb", algo.upper()))),
+            CSVOutputFormat(str(out / "progress.csv")),
+        ]
+        if verbose:
+            formats.append(HumanOutputFormat(sys.stdout))
+        logger = Logger(folder=str(out), output_formats=formats)
+        model.set_logger(logger)
+        metrics_cb = FovMetricsCallback(n_agents)
+        callbacks: list[BaseCallback] = [metrics_cb]
+        if checkpoint_every:
+            callbacks.append(
+                CheckpointCallback(
+                    save_freq=max(int(checkpoint_every) // venv.num_envs, 1),
+                    save_path=str(out / "checkpoints"),
+                    name_prefix="model",
+                    save_vecnormalize=normalize,
+                )
+            )
+        t0 = time.perf_counter()
+        interrupted = False
+        try:
+            with warnings.catch_warnings():
+                # SB3's bar is tqdm.rich, which warns that it is experimental
+                warnings.filterwarnings("ignore", message=".*rich is experimental.*")
+                model.learn(
+                    total_timesteps=int(timesteps),
+                    callback=CallbackList(callbacks),
+                    progress_bar=progress_bar,
+                )
+        except KeyboardInterrupt:  # Ctrl-C: keep what was learned so far
+            interrupted = True
+        wall = time.perf_counter() - t0
+        model_path = out / "model.zip"
+        model.save(str(model_path))
+        if normalize:
+            venv.save(str(out / "vecnormalize.pkl"))
+        logger.close()
+        venv.close()
+    finally:
+        torch.set_num_threads(prev_threads)
+
+    eval_kwargs = eval_config.to_dict()
+    eval_kwargs.pop("scenario")
+    if eval_kwargs.get("initial_poses") is None:
+        eval_kwargs.pop("initial_poses", None)
+    train_env_config = train_config.to_dict()
+    config = {
+        "format": CONFIG_FORMAT,
+        "algo": algo,
+        "scenario": scenario,
+        "env_kwargs": eval_kwargs,
+        "train_env_config": train_env_config,
+        "n_agents": n_agents,
+        "wrappers": [w for w in ("safety_filter", "belief") if wrap[w]],
+        **wrap,
+        "normalize": bool(normalize),
+        "hyperparams": _jsonable(hp),
+        "seed": int(seed),
+        "timesteps": int(timesteps),
+        "timesteps_done": int(model.num_timesteps),
+        "interrupted": interrupted,
+        "n_envs": int(n_envs),
+        "torch_threads": int(torch_threads),
+        "train_wall_s": wall,
+        "samples_per_s": model.num_timesteps / max(wall, 1e-9),
+        "episodes": metrics_cb.episodes,
+        "last_episode_metrics": metrics_cb.last_episode_metrics,
+        "versions": {
+            "stable_baselines3": stable_baselines3.__version__,
+            "torch": torch.__version__,
+            "numpy": np.__version__,
+            "python": platform.python_version(),
+        },
+    }
+    (out / "config.json").write_text(json.dumps(_jsonable(config), indent=2) + "\n")
+    return model_path
+
+
+# ------------------------------------------------------------------ reloading
+class LearnedPolicy:
+    """A trained shared policy, used like a baseline: ``reset(seed)``, ``act(obs)``.
+
+    ``act`` takes the observations the *evaluation env* emits, i.e. the scenario env
+    behind the safety filter if the policy was trained with it
+    (:meth:`make_env` builds that env). A policy trained with belief features computes
+    them itself (:class:`fov_marl.wrappers.belief.BeliefFeaturizer`, fed with each
+    robot's own observations only, as the training wrapper was), so ``act`` still
+    takes the env's plain observations; with the wrapper's default ``init="known"``
+    it reads the start poses from the env given to :meth:`bind` (the paper's
+    assumption, VII-B).
+
+    Actions are deterministic (the mean of the policy's Gaussian), float32 in
+    ``[-1, 1]``.
+
+    Attributes:
+        algo, scenario, env_kwargs, safety_filter, belief, belief_kwargs,
+        safety_filter_kwargs, n_agents, config (the whole ``config.json``), model.
+    """
+
+    def __init__(self, model: BaseAlgorithm, config: dict[str, Any], obs_norm: Any | None):
+        self.model = model
+        self.config = config
+        self.algo: str = config["algo"]
+        self.scenario: str = config["scenario"]
+        self.env_kwargs: dict[str, Any] = dict(config["env_kwargs"])
+        self.safety_filter: bool = bool(config.get("safety_filter", False))
+        self.safety_filter_kwargs: dict[str, Any] = dict(config.get("safety_filter_kwargs", {}))
+        self.belief: bool = bool(config.get("belief", False))
+        self.belief_kwargs: dict[str, Any] = dict(config.get("belief_kwargs", {}))
+        self.n_agents: int = int(config["n_agents"])
+        self._obs_norm = obs_norm
+        self._env: Any | None = None
+        self._featurizer: Any | None = None
+        self._seed: int | None = None
+        self._needs_reset = True
+        self._last_actions: dict[str, np.ndarray] | None = None
+
+    def make_env(self, render_mode: str | None = None, **overrides: Any) -> Any:
+        """The evaluation env: scenario + ``env_kwargs`` (+ safety filter), no belief wrapper.
+
+        ``overrides`` change config fields (e.g. ``max_cycles``); changing ``n_agents``
+        raises ``ValueError`` because the observation size depends on it.
+        """
+        if "n_agents" in overrides and int(overrides["n_agents"]) != self.n_agents:
+            raise ValueError(
+                f"n_agents must be {self.n_agents} (the policy's observation size depends on "
+                f"it), got {overrides['n_agents']}"
+            )
+        env = build_env(
+            self.scenario,
+            {**self.env_kwargs, **overrides},
+            safety_filter=self.safety_filter,
+            safety_filter_kwargs=self.safety_filter_kwargs,
+            render_mode=render_mode,
+        )
+        self.bind(env)
+        return env
+
+    def bind(self, env: Any) -> LearnedPolicy:
+        """Attach the evaluation env (needed for belief features); returns ``self``.
+
+        Usable as a policy factory: ``run_episode(..., policy=learned.bind, ...)``.
+
+        Raises:
+            ValueError: the env's agents or observation size differ from the training env's.
+        """
+        agents = list(env.possible_agents)
+        if len(agents) != self.n_agents:
+            raise ValueError(
+                f"env has {len(agents)} agents; this policy was trained with n_agents = "
+                f"{self.n_agents}"
+            )
+        self._env = env
+        self._featurizer = None
+        self._needs_reset = True
+        return self
+
+    def factory(self, env: Any) -> LearnedPolicy:
+        """Policy factory ``f(env) -> Policy`` for :func:`fov_marl.evaluation.run_episode`
+        (same as :meth:`bind`)."""
+        return self.bind(env)
+
+    @property
+    def name(self) -> str:
+        """``"<algo>[+filter][+belief]"``, for tables."""
+        return self.algo + "+filter" * self.safety_filter + "+belief" * self.belief
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start an episode; belief trackers are re-seeded from ``seed`` at the next ``act``."""
+        self._seed = seed
+        self._needs_reset = True
+        self._last_actions = None
+
+    def _features(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        if not self.belief:
+            return obs
+        from fov_marl.wrappers.belief import BeliefFeaturizer
+
+        if self._env is None:
+            self._env = self._private_env()
+        if self._featurizer is None:
+            self._featurizer = BeliefFeaturizer(self._env, **self.belief_kwargs)
+        if self._needs_reset or self._last_actions is None:
+            self._featurizer.reset(obs, seed=self._seed)
+        else:
+            self._featurizer.step(self._last_actions, obs)
+        return self._featurizer.augment(obs)
+
+    def _private_env(self) -> Any:
+        """An env of the training config, to size the trackers when :meth:`bind` was not
+        called; it is never stepped, so it cannot provide start poses."""
+        if self.belief_kwargs.get("init", "known") == "known":
+            raise ValueError(
+                "this policy uses belief features initialised at the known start poses "
+                "(init='known'); call policy.bind(env) with the evaluation env first"
+            )
+        return build_env(self.scenario, self.env_kwargs, safety_filter=False)
+
+    def act(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Deterministic actions ``(3,)`` float32 for every agent in ``obs``."""
+        feats = self._features(obs)
+        self._needs_reset = False
+        agents = [a for a in feats]
+        if not agents:
+            return {}
+        batch = np.stack([np.asarray(feats[a], dtype=np.float32) for a in agents])
+        if self._obs_norm is not None:
+            batch = self._obs_norm.normalize_obs(batch).astype(np.float32)
+        actions, _ = self.model.predict(batch, deterministic=True)
+        actions = np.clip(np.asarray(actions, dtype=np.float32), -1.0, 1.0)
+        out = {a: actions[i].copy() for i, a in enumerate(agents)}
+        self._last_actions = out
+        return out
+
+
+def _find_config(model_path: Path) -> Path:
+    for d in (model_path.parent, model_path.parent.parent):
+        if (d / "config.json").is_file():
+            return d / "config.json"
+    raise ValueError(f"no config.json beside {model_path} or in its parent folder")
+
+
+def _find_vecnormalize(model_path: Path) -> Path | None:
+    if model_path.name == "model.zip":
+        p = model_path.parent / "vecnormalize.pkl"
+        return p if p.is_file() else None
+    # checkpoint: checkpoints/model_<t>_steps.zip -> model_vecnormalize_<t>_steps.pkl
+    stem = model_path.stem
+    if stem.startswith("model_"):
+        p = model_path.parent / f"model_vecnormalize_{stem[len('model_') :]}.pkl"
+        if p.is_file():
+            return p
+    return None
+
+
+def load_policy(path: str | os.PathLike, env: Any | None = None) -> LearnedPolicy:
+    """Load ``model.zip`` (or a run folder, or a checkpoint) saved by :func:`train`.
+
+    Args:
+        path: ``DIR/model.zip``, ``DIR``, or ``DIR/checkpoints/model_<t>_steps.zip``.
+        env: optional evaluation env to :meth:`LearnedPolicy.bind`.
+
+    Raises:
+        ValueError: missing files or a config written by an unknown format.
+    """
+    p = Path(path)
+    if p.is_dir():
+        p = p / "model.zip"
+    if not p.is_file():
+        raise ValueError(f"policy file {p} does not exist")
+    config = json.loads(_find_config(p).read_text())
+    if config.get("format") != CONFIG_FORMAT:
+        raise ValueError(
+            f"config.json format must be {CONFIG_FORMAT!r}, got {config.get('format')!r}"
+        )
+    model = ALGOS[config["algo"]].load(str(p), device="cpu")
+    obs_norm = None
+    if config.get("normalize", False):
+        vn_path = _find_vecnormalize(p)
+        if vn_path is None:
+            raise ValueError(f"the policy was trained with normalisation but no stats beside {p}")
+        with open(vn_path, "rb") as f:
+            obs_norm = pickle.load(f)
+        obs_norm.training = False
+        obs_norm.norm_reward = False
+    policy = LearnedPolicy(model, config, obs_norm)
+    if env is not None:
+        policy.bind(env)
+    return policy

@@ -1,0 +1,145 @@
+"""SafetyFilterWrapper: any policy's actions made safe by the paper's PF + FoV-CBF QP.
+
+The incoming action of robot i is read as its desired input u* (mapped to a body
+velocity exactly as the env maps actions, :func:`fov_marl.spaces.action_to_velocity`)
+and replaced by the output of robot i's FoV-CBF controller (Eq. 12, 16-19), whose
+neighbour estimates come from robot i's own particle filters fed only with robot i's
+observations and the actions actually applied. It is the same pipeline as the
+``pfcbf`` baseline (:class:`fov_marl.pipeline.PfCbfPipeline`), with u* from the
+policy instead of Lloyd.
+
+Spaces, agents, rewards, terminations and truncations are those of the wrapped env.
+``infos[agent]["safety"]`` reports, per robot and step:
+
+======================  ===========================================================
+key                     meaning
+======================  ===========================================================
+``nominal_action``      (3,) float32, the policy's action (clipped to [-1, 1])
+``applied_action``      (3,) float32, the action sent to the env
+``intervened``          bool, ‖u − u*‖ above the controller's tolerance
+``status``              str, QP outcome (``"solved"``, ``"trivial"``, ``"fallback:..."``)
+``fallback``            bool, the QP failed and the documented safe fallback was used
+======================  ===========================================================
+
+Wall-clock cost is kept out of ``infos`` (so equal seeds give equal infos): the
+attribute ``last_cpu_s`` holds the seconds the filter spent on the whole team in the
+last step (tracker + QPs).
+
+The particle filters start from the true start poses (the paper's assumption,
+VII-B) read from ``env.unwrapped.poses`` at reset; pass ``init="uniform"`` to avoid
+it. Filter randomness is seeded from the ``seed`` given to :meth:`reset` (child
+streams of ``SeedSequence(seed)``, independent of the env's own stream).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from pettingzoo.utils.wrappers import BaseParallelWrapper
+
+from fov_marl.control import ControllerParams
+from fov_marl.envs.rendering import draw_beliefs
+from fov_marl.estimation import TrackerParams
+from fov_marl.pipeline import PfCbfPipeline
+from fov_marl.spaces import action_to_velocity
+
+__all__ = ["SafetyFilterWrapper"]
+
+
+class SafetyFilterWrapper(BaseParallelWrapper):
+    """Make any policy's actions safe (see the module docstring).
+
+    Args:
+        env: a fov_marl ParallelEnv (``fov_coverage_v0`` / ``fov_crossing_v0``), possibly
+            wrapped.
+        init: ``"known"`` or ``"uniform"`` particle initialisation.
+        tracker_params, controller_params: dataclasses or dicts of overrides.
+        draw_robot: robot whose beliefs :meth:`draw` shows, or None for none.
+    """
+
+    def __init__(
+        self,
+        env: Any,
+        *,
+        init: str = "known",
+        tracker_params: TrackerParams | dict | None = None,
+        controller_params: ControllerParams | dict | None = None,
+        draw_robot: int | None = 0,
+    ) -> None:
+        super().__init__(env)
+        base = env.unwrapped
+        if not hasattr(base, "config") or not hasattr(base, "poses"):
+            raise ValueError(
+                "SafetyFilterWrapper needs a fov_marl environment (with .config and .poses), "
+                f"got {type(base).__name__}"
+            )
+        if isinstance(tracker_params, dict):
+            tracker_params = TrackerParams(**tracker_params)
+        if isinstance(controller_params, dict):
+            controller_params = ControllerParams(**controller_params)
+        self.config = base.config
+        self.pipeline = PfCbfPipeline(
+            base.config,
+            tracker_params=tracker_params,
+            controller_params=controller_params,
+            init=init,  # type: ignore[arg-type]
+        )
+        self.draw_robot = draw_robot
+        self._seed_rng = np.random.default_rng()
+        self._ready = False
+        self.last_cpu_s = 0.0
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        obs, infos = self.env.reset(seed=seed, options=options)
+        if seed is not None:
+            self._seed_rng = np.random.default_rng(seed)
+        filter_seed = int(self._seed_rng.integers(2**63)) if seed is None else seed
+        self.pipeline.reset(obs, seed=filter_seed, initial_poses_world=self.env.unwrapped.poses)
+        self._ready = True
+        return obs, infos
+
+    def step(self, actions: dict[str, Any]):
+        if not self._ready:
+            raise ValueError("step() called before reset()")
+        base = self.env.unwrapped
+        # validate exactly as the env does (shape, NaN, unknown/missing agents)
+        act = base._validate_actions(actions)
+        cfg = self.config
+        t0 = time.perf_counter()
+        v, w = action_to_velocity(act, cfg.v_max_mps, cfg.omega_max_radps)
+        u_star = np.column_stack([v, w])
+        safe = self.pipeline.filter(u_star)
+        t_filter = time.perf_counter() - t0
+        agents = list(self.env.agents)
+        applied = {a: safe[base.agent_name_mapping[a]] for a in agents}
+        obs, rew, term, trunc, infos = self.env.step(applied)
+        t1 = time.perf_counter()
+        if obs:
+            self.pipeline.observe(obs)
+        t_filter += time.perf_counter() - t1
+        nominal = np.clip(act, -1.0, 1.0).astype(np.float32)
+        for a in infos:
+            i = base.agent_name_mapping[a]
+            res = self.pipeline.last_results[i]
+            infos[a]["safety"] = {
+                "nominal_action": nominal[i],
+                "applied_action": safe[i],
+                "intervened": bool(res.intervened) if res is not None else False,
+                "status": res.status if res is not None else "no_neighbours",
+                "fallback": bool(res.fallback) if res is not None else False,
+            }
+        self.last_cpu_s = t_filter
+        if not self.env.agents:
+            self._ready = False
+        return obs, rew, term, trunc, infos
+
+    def draw(self, canvas: Any) -> None:
+        """Render layer: the beliefs of robot ``draw_robot`` (particles, ellipses)."""
+        if (
+            self._ready
+            and self.draw_robot is not None
+            and self.pipeline.estimates_view() is not None
+        ):
+            draw_beliefs(canvas, self.pipeline, robots=(self.draw_robot,))

@@ -1,0 +1,256 @@
+"""FovCbfController: levels, pruning, fallbacks and scripted closed loops (Section VI)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fov_marl.config import make_config
+from fov_marl.control import ControllerParams, FovCbfController
+from fov_marl.control.qp import project_to_admissible
+from fov_marl.geometry import in_fov, integrate_unicycle, rotation, world_to_body
+
+CFG = make_config()
+
+
+def _random_instance(rng, M, spread=12.0):
+    p = rng.uniform(-spread, spread, (M, 2))
+    r = np.hypot(p[:, 0], p[:, 1])
+    p[r < 1.0] *= (1.5 / np.maximum(r[r < 1.0], 1e-3))[:, None]
+    v = rng.uniform(-0.7, 0.7, (M, 2))
+    d = np.maximum(0.0, np.hypot(p[:, 0], p[:, 1]) - rng.uniform(0.3, 6.0, M))
+    u_star = np.array([*rng.uniform(-1, 1, 2), rng.uniform(-1.5, 1.5)])
+    return u_star, p, v, d
+
+
+def _admissible(u):
+    return (
+        math.hypot(u[0], u[1]) <= CFG.v_max_mps + 1e-9 and abs(u[2]) <= CFG.omega_max_radps + 1e-9
+    )
+
+
+def test_no_neighbours_returns_projected_u_star():
+    ctrl = FovCbfController(CFG)
+    u_star = np.array([0.6, 0.8, 2.0])
+    res = ctrl.solve(u_star, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
+    assert res.status == "unconstrained" and not res.fallback and not res.intervened
+    np.testing.assert_allclose(res.u, project_to_admissible(u_star, 1.0, 1.5, 16))
+    assert res.kappa.shape == (0, 4)
+
+
+@pytest.mark.parametrize("fov", [60.0, 120.0, 200.0, 360.0])
+@pytest.mark.parametrize("seed", range(5))
+def test_random_instances_give_finite_admissible_inputs(fov, seed):
+    cfg = make_config(fov_deg=fov)
+    ctrl = FovCbfController(cfg)
+    rng = np.random.default_rng(seed)
+    for _ in range(20):
+        u_star, p, v, d = _random_instance(rng, int(rng.integers(1, 20)))
+        res = ctrl.solve(u_star, p, v, d)
+        assert np.all(np.isfinite(res.u)) and _admissible(res.u)
+        assert res.status in ("unconstrained", "solved", "relaxed")
+        assert not res.fallback
+        assert res.kappa.shape == p.shape[:1] + (4,)
+        assert np.all(res.kappa[~res.active] == 0)
+    assert ctrl.stats["steps"] == 20 and ctrl.stats["fallbacks"] == 0
+
+
+@pytest.mark.parametrize("seed", range(15))
+def test_pruning_never_changes_the_solution(seed):
+    """Rows pruned in closed form hold for every input: same u and κ with and without."""
+    rng = np.random.default_rng(50 + seed)
+    big = dict(max_levels=64)
+    a = FovCbfController(CFG, ControllerParams(prune=True, **big))
+    b = FovCbfController(CFG, ControllerParams(prune=False, **big))
+    for _ in range(10):
+        u_star, p, v, d = _random_instance(rng, int(rng.integers(1, 25)), spread=25.0)
+        ra, rb = a.solve(u_star, p, v, d), b.solve(u_star, p, v, d)
+        assert ra.active.sum() <= rb.active.sum()
+        np.testing.assert_allclose(ra.u, rb.u, atol=1e-6)
+        np.testing.assert_allclose(ra.kappa, rb.kappa, atol=1e-6)
+
+
+def test_levels_follow_ascending_distance_and_cap():
+    ctrl = FovCbfController(CFG, ControllerParams(max_levels=2, prune=False))
+    d = np.array([5.0, 1.0, 3.0, 0.5])
+    active = np.ones((4, 4), dtype=bool)
+    lev = ctrl.assign_levels(active, d, np.arange(4))
+    np.testing.assert_array_equal(lev[:, 2], 0)  # safety rows first
+    # nearest (index 3) gets level 1, the rest share the capped level 2
+    np.testing.assert_array_equal(lev[[3, 1, 2, 0]][:, 0], [1, 2, 2, 2])
+    paper = FovCbfController(CFG, ControllerParams(safety_first=False, max_levels=8))
+    lev_p = paper.assign_levels(active, d, np.arange(4))
+    np.testing.assert_array_equal(lev_p[[3, 1, 2, 0]], np.repeat([[1], [2], [3], [4]], 4, axis=1))
+    hard = FovCbfController(CFG, ControllerParams(safety_hard=True))
+    assert np.all(hard.assign_levels(active, d, np.arange(4))[:, 2] == -1)
+    # ties in d are broken by id
+    lev_t = paper.assign_levels(active[:2], np.array([1.0, 1.0]), np.array([7, 3]))
+    np.testing.assert_array_equal(lev_t[:, 0], [2, 1])
+
+
+def test_nearer_neighbour_has_priority_in_a_conflict():
+    """Two neighbours behind-left and behind-right, both hard: only one can be faced."""
+    ctrl = FovCbfController(CFG, ControllerParams(max_levels=8))
+    p = np.array([[-4.0, 3.0], [-4.0, -3.0]])
+    v = np.zeros((2, 2))
+    u_star = np.zeros(3)
+    res_a = ctrl.solve(u_star, p, v, np.array([0.0, 1.0]))
+    res_b = ctrl.solve(u_star, p, v, np.array([1.0, 0.0]))
+    # the nearer neighbour's FoV rows are violated less than the farther one's
+    assert res_a.kappa[0, :2].sum() < res_a.kappa[1, :2].sum()
+    assert res_b.kappa[1, :2].sum() < res_b.kappa[0, :2].sum()
+    assert res_a.u[2] > 0 > res_b.u[2]  # turns left toward 0, right toward 1
+
+
+@pytest.mark.parametrize("what", ["u_star", "p_body", "v_est_body", "d"])
+def test_non_finite_inputs_fall_back_without_raising(what):
+    ctrl = FovCbfController(CFG)
+    args = {
+        "u_star": np.array([0.5, 0.0, 0.0]),
+        "p_body": np.array([[3.0, 0.0]]),
+        "v_est_body": np.zeros((1, 2)),
+        "d": np.array([1.0]),
+    }
+    args[what] = np.full_like(args[what], np.nan)
+    res = ctrl.solve(**args)
+    assert res.status == "invalid_input" and res.fallback
+    np.testing.assert_array_equal(res.u, np.zeros(3))
+    assert ctrl.stats["fallbacks"] == 1
+
+
+def test_shape_errors_raise_value_error():
+    ctrl = FovCbfController(CFG)
+    with pytest.raises(ValueError, match="u_star"):
+        ctrl.solve(np.zeros(2), np.zeros((1, 2)), np.zeros((1, 2)), np.zeros(1))
+    with pytest.raises(ValueError, match="v_est_body"):
+        ctrl.solve(np.zeros(3), np.zeros((1, 2)), np.zeros((2, 2)), np.zeros(1))
+    with pytest.raises(ValueError, match="d must"):
+        ctrl.solve(np.zeros(3), np.zeros((1, 2)), np.zeros((1, 2)), np.zeros(2))
+    with pytest.raises(ValueError, match="ids"):
+        ctrl.solve(np.zeros(3), np.zeros((1, 2)), np.zeros((1, 2)), np.zeros(1), np.zeros(3))
+
+
+def _squeeze():
+    """Robot between two neighbours 1.5 m away (inside D_s) closing at 1 m/s each."""
+    p = np.array([[0.0, 1.5], [0.0, -1.5]])
+    v = np.array([[0.0, -1.0], [0.0, 1.0]])
+    return np.array([0.5, 0.0, 0.0]), p, v, np.zeros(2)
+
+
+def test_infeasible_hard_safety_rows_brake_and_are_counted():
+    ctrl = FovCbfController(CFG, ControllerParams(safety_hard=True))
+    res = ctrl.solve(*_squeeze())
+    assert res.status == "qp_failed" and res.fallback
+    np.testing.assert_array_equal(res.u, np.zeros(3))
+    assert ctrl.stats["fallbacks"] == 1
+
+
+def test_infeasible_safety_level_is_relaxed_when_soft():
+    ctrl = FovCbfController(CFG)
+    res = ctrl.solve(*_squeeze())
+    assert res.status == "relaxed" and not res.fallback
+    assert res.safety_violation > 0
+    assert _admissible(res.u)
+
+
+def test_intervened_flag():
+    ctrl = FovCbfController(CFG)
+    far = ctrl.solve(
+        np.array([1.0, 0.0, 1.0]), np.array([[-30.0, 0.0]]), np.zeros((1, 2)), np.array([25.0])
+    )
+    assert not far.intervened and far.status == "unconstrained"
+    near = ctrl.solve(
+        np.array([1.0, 0.0, 0.0]), np.array([[2.1, 0.0]]), np.zeros((1, 2)), np.array([0.0])
+    )
+    assert near.intervened and near.u[0] < 0.5
+    assert ctrl.stats["interventions"] == 1
+
+
+def test_osqp_backend_runs_the_same_pipeline():
+    rng = np.random.default_rng(3)
+    a = FovCbfController(CFG)
+    b = FovCbfController(CFG, ControllerParams(qp_backend="osqp"))
+    for _ in range(10):
+        u_star, p, v, d = _random_instance(rng, 6)
+        ra, rb = a.solve(u_star, p, v, d), b.solve(u_star, p, v, d)
+        assert np.all(np.isfinite(rb.u)) and _admissible(rb.u)
+        if ra.status in ("unconstrained", "solved") and rb.status != "degraded":
+            np.testing.assert_allclose(rb.u, ra.u, atol=1e-2)
+
+
+# --------------------------------------------------------------------------- closed loops
+def _run_pair(u_star_fn, pose_i, pose_j, v_j_world, ellipse_radius, steps, params=None, cfg=CFG):
+    """Simulate robot i (controller) and neighbour j (constant velocity) with exact kinematics.
+
+    The controller sees the true relative position and velocity, and d from an isotropic
+    ellipse of radius ``ellipse_radius`` around j.
+    """
+    ctrl = FovCbfController(cfg, params)
+    pose_i, pose_j = np.array(pose_i, float), np.array(pose_j, float)
+    vj = np.asarray(v_j_world, float)
+    log = []
+    for _ in range(steps):
+        p_body = world_to_body(pose_j[:2], pose_i)
+        v_body = rotation(pose_i[2]).T @ vj
+        d = max(0.0, math.hypot(*p_body) - ellipse_radius)
+        u_star = u_star_fn(pose_i, p_body)
+        res = ctrl.solve(u_star, p_body[None], v_body[None], np.array([d]))
+        assert not res.fallback
+        pose_i = integrate_unicycle(pose_i, res.u[:2], res.u[2], cfg.dt_s)
+        pose_j = pose_j + np.append(vj * cfg.dt_s, 0.0)
+        p_next = world_to_body(pose_j[:2], pose_i)
+        log.append((p_next, d, res))
+    return log
+
+
+def _seen(log, cfg=CFG):
+    return np.array(
+        [bool(in_fov(p[None], cfg.fov_rad, cfg.detection_range_m)[0]) for p, _, _ in log]
+    )
+
+
+def test_hard_neighbour_stays_in_view_while_u_star_turns_away():
+    """d = 0 (ε = 0): u* spins the robot; the border rows stop it with j still in view."""
+    log = _run_pair(
+        lambda *_: np.array([0.0, 0.0, 1.5]), (20, 20, 0), (22.5, 20, 0), (0, 0), 5.0, 80
+    )
+    assert _seen(log).all()
+    bearing = math.degrees(math.atan2(log[-1][0][1], log[-1][0][0]))
+    assert 40.0 < abs(bearing) <= 60.0 + 1e-6  # turned up to the border, not past it
+    assert all(r.intervened for _, _, r in log[-40:])
+
+
+def test_hard_neighbour_stays_in_view_while_u_star_backs_away():
+    """A large ellipse keeps d = 0: backing off and turning, j stays in view and in range."""
+    log = _run_pair(
+        lambda *_: np.array([-1.0, 0.0, 1.0]), (20, 20, 0), (23, 20.5, 0), (0, 0), 12.0, 150
+    )
+    assert _seen(log).all()
+    assert max(math.hypot(*p) for p, _, _ in log) <= CFG.detection_range_m + 1e-6
+
+
+def test_hard_neighbour_moving_is_tracked():
+    """j crosses in front at 0.5 m/s with d ≈ 0: the robot turns to keep it in view."""
+    log = _run_pair(lambda *_: np.zeros(3), (20, 20, 0), (24, 17, 0), (0, 0.5), 6.0, 60)
+    assert _seen(log).all()
+
+
+def test_far_neighbour_is_released():
+    """d large (slack high): the robot spins as u* asks and j leaves the FoV."""
+    log = _run_pair(
+        lambda *_: np.array([0.0, 0.0, 1.5]), (20, 20, 0), (32.5, 20, 0), (0, 0), 0.5, 20
+    )
+    assert not _seen(log).all()
+    assert not any(r.intervened for _, _, r in log)
+
+
+def test_safety_distance_is_kept_driving_at_a_neighbour():
+    """u* drives straight at j (static, then approaching): centres stay ≥ D_s apart."""
+    for vj in ((0.0, 0.0), (-0.5, 0.0)):
+        log = _run_pair(
+            lambda pose, pb: np.array([1.0, 0.0, 0.0]), (10, 20, 0), (18, 20, 0), vj, 0.5, 120
+        )
+        dmin = min(math.hypot(*p) for p, _, _ in log)
+        assert dmin >= CFG.safety_distance_m - 0.05

@@ -1,0 +1,317 @@
+"""The parameter-sharing VecEnv adapter against SB3's VecEnv contract and against
+independently stepped env copies (the reference)."""
+
+from __future__ import annotations
+
+import functools
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from pettingzoo import ParallelEnv  # noqa: E402
+from pettingzoo.utils.wrappers import BaseParallelWrapper  # noqa: E402
+from stable_baselines3.common.env_checker import check_env  # noqa: E402
+from stable_baselines3.common.vec_env import (  # noqa: E402
+    DummyVecEnv,
+    VecCheckNan,
+    VecMonitor,
+    VecNormalize,
+)
+
+from fov_marl.envs import fov_coverage_v0, fov_crossing_v0  # noqa: E402
+from fov_marl.training.vec_env import (  # noqa: E402
+    ParallelEnvVecEnv,
+    make_parallel_vec_env,
+    wrapper_chain,
+)
+
+N = 3
+
+
+def _cov(**kw):
+    return fov_coverage_v0.parallel_env(**{"n_agents": N, "max_cycles": 7, **kw})
+
+
+def _actions(rng, venv, scale=1.0):
+    return (scale * rng.uniform(-1, 1, (venv.num_envs, 3))).astype(np.float32)
+
+
+class _SingleAgentGym(gym.Env):
+    """Reference: a 1-agent ParallelEnv as a gymnasium Env, for SB3's DummyVecEnv."""
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, penv):
+        self.penv = penv
+        self.agent = penv.possible_agents[0]
+        self.observation_space = penv.observation_space(self.agent)
+        self.action_space = penv.action_space(self.agent)
+
+    def reset(self, seed=None, options=None):
+        obs, infos = self.penv.reset(seed=seed, options=options)
+        return obs[self.agent], infos[self.agent]
+
+    def step(self, action):
+        obs, rew, term, trunc, infos = self.penv.step({self.agent: action})
+        a = self.agent
+        return obs[a], rew[a], term[a], trunc[a], infos[a]
+
+
+def test_spaces_shapes_dtypes_and_slot_layout():
+    venv = make_parallel_vec_env(_cov, n_envs=2, seed=0)
+    env = _cov()
+    assert venv.num_envs == 2 * N
+    assert venv.observation_space == env.observation_space("robot_0")
+    assert venv.action_space == env.action_space("robot_0")
+    obs = venv.reset()
+    assert obs.shape == (2 * N, env.observation_space("robot_0").shape[0])
+    assert obs.dtype == np.float32
+    assert all(venv.observation_space.contains(o) for o in obs)
+    assert [venv.slot_to_copy_agent(s) for s in range(2 * N)] == [
+        (k, f"robot_{i}") for k in range(2) for i in range(N)
+    ]
+    assert venv.slot(1, "robot_2") == N + 2
+    rng = np.random.default_rng(0)
+    obs, rew, done, infos = venv.step(_actions(rng, venv))
+    assert obs.shape == (2 * N, obs.shape[1]) and obs.dtype == np.float32
+    assert rew.shape == (2 * N,) and rew.dtype == np.float32
+    assert done.shape == (2 * N,) and done.dtype == bool
+    assert len(infos) == 2 * N
+    for s, info in enumerate(infos):
+        assert info["agent"] == f"robot_{s % N}"
+        assert info["agent_index"] == s % N and info["env_index"] == s // N
+        assert {"eta", "collisions_total"} <= set(info["metrics"])
+        assert info["TimeLimit.truncated"] is False
+    assert len(venv.reset_infos) == 2 * N and "metrics" in venv.reset_infos[0]
+
+
+def test_matches_independently_stepped_copies_through_truncation_and_auto_reset():
+    """Every slot equals the same agent of a reference copy seeded seed + k, stepped by
+    hand; at the time limit: done, TimeLimit.truncated, terminal_observation, auto-reset."""
+    seed, n_envs, cycles = 11, 2, 7
+    venv = make_parallel_vec_env(_cov, n_envs=n_envs, seed=seed)
+    refs = [_cov() for _ in range(n_envs)]
+    ref_obs = [r.reset(seed=seed + k)[0] for k, r in enumerate(refs)]
+    obs = venv.reset()
+    rng = np.random.default_rng(1)
+    for t in range(2 * cycles + 3):
+        for k in range(n_envs):
+            for i, a in enumerate(refs[k].possible_agents):
+                np.testing.assert_array_equal(obs[k * N + i], ref_obs[k][a])
+        act = _actions(rng, venv)
+        obs, rew, done, infos = venv.step(act)
+        for k, ref in enumerate(refs):
+            o, r, te, tr, inf = ref.step(
+                {a: act[k * N + i] for i, a in enumerate(ref.possible_agents)}
+            )
+            last = (t + 1) % cycles == 0
+            for i, a in enumerate(ref.possible_agents):
+                s = k * N + i
+                assert rew[s] == np.float32(r[a])
+                assert done[s] == last
+                assert infos[s]["metrics"] == inf[a]["metrics"]
+                if last:
+                    assert tr[a] and not te[a]
+                    assert infos[s]["TimeLimit.truncated"] is True
+                    np.testing.assert_array_equal(infos[s]["terminal_observation"], o[a])
+                    assert infos[s]["terminal_observation"].dtype == np.float32
+                else:
+                    assert "terminal_observation" not in infos[s]
+            if (t + 1) % cycles == 0:
+                assert not ref.agents
+                o, _ = ref.reset()  # auto-reset continues the copy's own generator
+            ref_obs[k] = o
+
+
+def test_matches_sb3_dummy_vec_env_on_single_agent_envs():
+    """With N = 1 each copy is a plain single-agent env: the adapter must give exactly
+    what SB3's own DummyVecEnv gives (obs, rewards, dones, terminal obs, truncation)."""
+
+    def one():
+        return fov_coverage_v0.parallel_env(n_agents=1, max_cycles=5)
+
+    check_env(_SingleAgentGym(one()), warn=True)
+    ours = ParallelEnvVecEnv([one, one])
+    ref = DummyVecEnv([lambda: _SingleAgentGym(one()), lambda: _SingleAgentGym(one())])
+    ours.seed(3)
+    ref.seed(3)
+    np.testing.assert_array_equal(ours.reset(), ref.reset())
+    rng = np.random.default_rng(2)
+    for _ in range(12):
+        act = _actions(rng, ours)
+        o1, r1, d1, i1 = ours.step(act)
+        o2, r2, d2, i2 = ref.step(act)
+        np.testing.assert_array_equal(o1, o2)
+        np.testing.assert_array_equal(r1, r2)
+        np.testing.assert_array_equal(d1, d2)
+        for a, b in zip(i1, i2, strict=True):
+            assert a["TimeLimit.truncated"] == b["TimeLimit.truncated"]
+            assert ("terminal_observation" in a) == ("terminal_observation" in b)
+            if "terminal_observation" in a:
+                np.testing.assert_array_equal(a["terminal_observation"], b["terminal_observation"])
+            assert a["metrics"] == b["metrics"]
+
+
+def test_termination_is_not_marked_as_truncation():
+    """Crossing: robots started on their targets terminate on the first step."""
+    probe = fov_crossing_v0.parallel_env(n_agents=4)
+    probe.reset(seed=5)
+    starts = np.column_stack([probe.targets, np.zeros(4)])
+
+    def at_target():
+        return fov_crossing_v0.parallel_env(n_agents=4, initial_poses=starts, max_cycles=50)
+
+    venv = make_parallel_vec_env(at_target, n_envs=1, seed=5)
+    venv.reset()
+    _, _, done, infos = venv.step(np.zeros((4, 3), np.float32))
+    assert done.all()
+    assert all(i["TimeLimit.truncated"] is False for i in infos)
+    assert all("terminal_observation" in i for i in infos)
+
+
+def test_seed_gives_distinct_copies_and_repeatable_runs():
+    def run(seed):
+        venv = make_parallel_vec_env(_cov, n_envs=3)
+        seeds = venv.seed(seed)
+        out = [venv.reset()]
+        rng = np.random.default_rng(0)
+        for _ in range(20):  # crosses two auto-resets
+            out.append(venv.step(_actions(rng, venv))[0])
+        return seeds, np.stack(out)
+
+    seeds, a = run(7)
+    assert seeds == [7] * N + [8] * N + [9] * N
+    _, b = run(7)
+    np.testing.assert_array_equal(a, b)
+    _, c = run(8)
+    # copies differ from each other; seed 8 shifts the copies by one
+    own = a[0, :, -7:-5]  # own world (x, y) from the cue
+    assert not np.allclose(own[:N], own[N : 2 * N])
+    np.testing.assert_array_equal(c[0, :N], a[0, N : 2 * N])
+    # a seed is used once: a second reset() continues the generators, it does not repeat
+    venv = make_parallel_vec_env(_cov, n_envs=1, seed=7)
+    first = venv.reset()
+    assert not np.array_equal(first, venv.reset())
+
+
+def test_attribute_access_and_wrappers():
+    class Marker(BaseParallelWrapper):
+        pass
+
+    venv = ParallelEnvVecEnv([_cov, lambda: Marker(_cov())])
+    assert venv.get_attr("max_cycles") == [7] * (2 * N)
+    assert venv.get_attr("max_cycles", indices=[0, N]) == [7, 7]
+    assert venv.env_is_wrapped(Marker) == [False] * N + [True] * N
+    assert venv.env_is_wrapped(Marker, indices=N + 1) == [True]
+    assert len(wrapper_chain(venv.envs[1])) == 2
+    # set_attr reaches the base env under the wrapper, once per copy
+    venv.set_attr("max_cycles", 2, indices=[N, N + 1])
+    assert venv.envs[0].max_cycles == 7
+    assert venv.envs[1].unwrapped.max_cycles == 2
+    assert "max_cycles" not in vars(venv.envs[1])
+    venv.seed(0)
+    venv.reset()
+    rng = np.random.default_rng(0)
+    venv.step(_actions(rng, venv))
+    _, _, done, _ = venv.step(_actions(rng, venv))
+    assert done.tolist() == [False] * N + [True] * N
+    # env_method: once per copy, result repeated for the copy's slots
+    states = venv.env_method("state")
+    assert len(states) == 2 * N
+    assert states[0] is states[N - 1] and states[0] is not states[N]
+    assert venv.env_method("state", indices=[N])[0].shape == venv.envs[1].state_space.shape
+    with pytest.raises(ValueError, match="slot index"):
+        venv.get_attr("max_cycles", indices=[2 * N])
+
+
+def test_actions_are_passed_through_and_clipped_by_the_env():
+    a = make_parallel_vec_env(_cov, n_envs=1, seed=1)
+    b = make_parallel_vec_env(_cov, n_envs=1, seed=1)
+    a.reset()
+    b.reset()
+    big = np.tile(np.array([[5.0, -7.0, 3.0]], np.float32), (N, 1))
+    np.testing.assert_array_equal(a.step(big)[0], b.step(np.clip(big, -1, 1))[0])
+    with pytest.raises(ValueError, match="shape"):
+        a.step(np.zeros((N + 1, 3), np.float32))
+    with pytest.raises(ValueError, match="finite"):
+        a.step(np.full((N, 3), np.nan, np.float32))
+
+
+def test_sb3_wrappers_stack_on_the_adapter():
+    venv = VecNormalize(VecMonitor(VecCheckNan(make_parallel_vec_env(_cov, 2, seed=0))))
+    obs = venv.reset()
+    rng = np.random.default_rng(0)
+    episodes = []
+    for _ in range(8):
+        obs, rew, done, infos = venv.step(_actions(rng, venv))
+        episodes += [i["episode"] for i in infos if "episode" in i]
+    assert obs.shape == (2 * N, venv.observation_space.shape[0])
+    assert len(episodes) == 2 * N and all(e["l"] == 7 for e in episodes)
+
+
+class _Stub(ParallelEnv):
+    """Two agents; ``end_at`` steps per agent; optional odd observation space."""
+
+    metadata = {"name": "stub"}
+    render_mode = None
+
+    def __init__(self, end_at=(3, 3), odd_space=False):
+        self.possible_agents = ["a", "b"]
+        self.end_at = dict(zip(self.possible_agents, end_at, strict=True))
+        box = gym.spaces.Box(-1, 1, (2,), np.float32)
+        self._obs = {"a": box, "b": gym.spaces.Box(-1, 1, (3,) if odd_space else (2,))}
+        self._act = gym.spaces.Box(-1, 1, (1,), np.float32)
+
+    def observation_space(self, agent):
+        return self._obs[agent]
+
+    def action_space(self, agent):
+        return self._act
+
+    def reset(self, seed=None, options=None):
+        self.agents, self.t = list(self.possible_agents), 0
+        return {a: np.zeros(2, np.float32) for a in self.agents}, {a: {} for a in self.agents}
+
+    def step(self, actions):
+        self.t += 1
+        term = {a: self.t >= self.end_at[a] for a in self.agents}
+        obs = {a: np.full(2, self.t / 10, np.float32) for a in self.agents}
+        out = (obs, dict.fromkeys(self.agents, 1.0), term, dict.fromkeys(self.agents, False))
+        out += ({a: {} for a in self.agents},)
+        self.agents = [a for a in self.agents if not term[a]]
+        return out
+
+
+def test_rejects_bad_envs():
+    with pytest.raises(ValueError, match="at least one"):
+        ParallelEnvVecEnv([])
+    env = _cov()
+    with pytest.raises(ValueError, match="same env instance"):
+        ParallelEnvVecEnv([lambda: env, lambda: env])
+    with pytest.raises(ValueError, match="observation space of b"):
+        ParallelEnvVecEnv([functools.partial(_Stub, odd_space=True)])
+    with pytest.raises(ValueError, match="same agents"):
+        ParallelEnvVecEnv([_cov, lambda: fov_coverage_v0.parallel_env(n_agents=N + 1)])
+    with pytest.raises(ValueError, match="n_envs"):
+        make_parallel_vec_env(_cov, n_envs=0)
+    venv = ParallelEnvVecEnv([functools.partial(_Stub, end_at=(2, 3))])
+    venv.reset()
+    venv.step(np.zeros((2, 1), np.float32))
+    with pytest.raises(ValueError, match="different times"):
+        venv.step(np.zeros((2, 1), np.float32))
+
+
+def test_stub_termination_and_seed_return():
+    venv = ParallelEnvVecEnv([_Stub, _Stub])
+    assert venv.seed(4) == [4, 4, 5, 5]
+    venv.reset()
+    for _ in range(2):
+        _, rew, done, _ = venv.step(np.zeros((4, 1), np.float32))
+        assert not done.any() and (rew == 1).all()
+    obs, _, done, infos = venv.step(np.zeros((4, 1), np.float32))
+    assert done.all() and not any(i["TimeLimit.truncated"] for i in infos)
+    np.testing.assert_array_equal(infos[0]["terminal_observation"], np.full(2, 0.3, np.float32))
+    np.testing.assert_array_equal(obs, np.zeros((4, 2)))  # reset observation
