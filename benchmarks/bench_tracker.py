@@ -3,7 +3,7 @@
 Usage::
 
     .venv/bin/python benchmarks/bench_tracker.py [--p-totals 1000 2000 5000]
-        [--n-agents 6 12 48] [--steps 100] [--json]
+        [--n-agents 6 12 48] [--steps 100] [--repeats 3] [--json]
 """
 
 from __future__ import annotations
@@ -19,10 +19,13 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--p-totals", type=int, nargs="+", default=[1000, 2000, 5000])
     ap.add_argument("--n-agents", type=int, nargs="+", default=[6, 12, 48])
     ap.add_argument("--steps", type=int, default=100)
+    ap.add_argument("--repeats", type=int, default=3, help="report the minimum over repeats")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
     args = ap.parse_args(argv)
-    rows = bench_tracker(args.p_totals, args.n_agents, steps=args.steps, seed=args.seed)
+    rows = bench_tracker(
+        args.p_totals, args.n_agents, steps=args.steps, repeats=args.repeats, seed=args.seed
+    )
     print(json.dumps(rows, indent=2) if args.json else format_table(rows))
 
 

@@ -218,13 +218,13 @@ def ellipse_distance(
     lo = np.maximum(np.maximum(S - a2, bv - b2), 0.0)
     hi = np.maximum(S - b2, lo)
     t = lo
-    for _ in range(n_iter):
-        qa, qb = au / (t + a2), bv / (t + b2)
-        f = qa * qa + qb * qb - 1.0
-        df = -2.0 * (qa * qa / (t + a2) + qb * qb / (t + b2))
-        with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for _ in range(n_iter):
+            qa, qb = au / (t + a2), bv / (t + b2)
+            f = qa * qa + qb * qb - 1.0
+            df = -2.0 * (qa * qa / (t + a2) + qb * qb / (t + b2))
             step = np.where(df < 0.0, f / df, 0.0)
-        t = np.clip(t - step, lo, hi)
+            t = np.minimum(np.maximum(t - step, lo), hi)
     x = a2 * u / (t + a2)
     y = b2 * v / (t + b2)
     d = np.hypot(u - x, v - y)

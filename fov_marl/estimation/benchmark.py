@@ -33,11 +33,34 @@ def _record(n_agents: int, steps: int, seed: int):
     return cfg, poses0, obs0, acts, obs
 
 
+def _time_single(cfg, params, poses0, obs0, acts, obs, warmup, steps, seed) -> float:
+    tr = NeighborTracker(cfg, 0, params, np.random.default_rng(seed))
+    tr.reset(obs0[0], poses0)
+    for t in range(warmup):
+        tr.step(acts[t][0], obs[t][0])
+    t0 = time.perf_counter()
+    for t in range(warmup, warmup + steps):
+        tr.step(acts[t][0], obs[t][0])
+    return (time.perf_counter() - t0) / steps * 1e3
+
+
+def _time_bank(cfg, params, poses0, obs0, acts, obs, warmup, steps, seed) -> float:
+    b = TrackerBank(cfg, params, seed=seed)
+    b.reset(obs0, poses0)
+    for t in range(warmup):
+        b.step(acts[t], obs[t])
+    t0 = time.perf_counter()
+    for t in range(warmup, warmup + steps):
+        b.step(acts[t], obs[t])
+    return (time.perf_counter() - t0) / steps / cfg.n_agents * 1e3
+
+
 def bench_tracker(
     p_totals: Iterable[int] = (1000, 2000, 5000),
     n_agents: Iterable[int] = (6, 12, 48),
     steps: int = 100,
     warmup: int = 10,
+    repeats: int = 3,
     seed: int = 0,
     single: bool = True,
     bank: bool = True,
@@ -47,17 +70,24 @@ def bench_tracker(
     For each (P_T, N): a :class:`NeighborTracker` of robot 0 stepped alone
     (``single_ms_per_robot_step``) and a :class:`TrackerBank` of all N robots
     (``bank_ms_per_robot_step`` = bank step time / N), over ``steps`` recorded steps after
-    ``warmup`` untimed ones.
+    ``warmup`` untimed ones; the minimum over ``repeats`` runs (the machine may be
+    shared, and the minimum is the least disturbed).
 
     Returns:
-        One dict per (P_T, N): ``p_total, n_agents, n_neighbours, steps,
+        One dict per (P_T, N): ``p_total, n_agents, n_neighbours, steps, repeats,
         single_ms_per_robot_step, bank_ms_per_robot_step`` (``None`` when skipped).
+
+    Raises:
+        ValueError: ``steps < 1``, ``warmup < 0`` or ``repeats < 1``.
     """
-    if steps < 1 or warmup < 0:
-        raise ValueError(f"steps must be >= 1 and warmup >= 0, got {steps}, {warmup}")
+    if steps < 1 or warmup < 0 or repeats < 1:
+        raise ValueError(
+            f"steps must be >= 1, warmup >= 0 and repeats >= 1, got {steps}, {warmup}, {repeats}"
+        )
     rows = []
     for n in n_agents:
-        cfg, poses0, obs0, acts, obs = _record(int(n), warmup + steps, seed)
+        episode = _record(int(n), warmup + steps, seed)
+        cfg = episode[0]
         for p_total in p_totals:
             params = TrackerParams(n_particles_total=int(p_total))
             row: dict = {
@@ -65,27 +95,15 @@ def bench_tracker(
                 "n_agents": int(n),
                 "n_neighbours": int(n) - 1,
                 "steps": int(steps),
+                "repeats": int(repeats),
                 "single_ms_per_robot_step": None,
                 "bank_ms_per_robot_step": None,
             }
+            args = (cfg, params, *episode[1:], warmup, steps, seed)
             if single:
-                tr = NeighborTracker(cfg, 0, params, np.random.default_rng(seed))
-                tr.reset(obs0[0], poses0)
-                for t in range(warmup):
-                    tr.step(acts[t][0], obs[t][0])
-                t0 = time.perf_counter()
-                for t in range(warmup, warmup + steps):
-                    tr.step(acts[t][0], obs[t][0])
-                row["single_ms_per_robot_step"] = (time.perf_counter() - t0) / steps * 1e3
+                row["single_ms_per_robot_step"] = min(_time_single(*args) for _ in range(repeats))
             if bank:
-                b = TrackerBank(cfg, params, seed=seed)
-                b.reset(obs0, poses0)
-                for t in range(warmup):
-                    b.step(acts[t], obs[t])
-                t0 = time.perf_counter()
-                for t in range(warmup, warmup + steps):
-                    b.step(acts[t], obs[t])
-                row["bank_ms_per_robot_step"] = (time.perf_counter() - t0) / steps / n * 1e3
+                row["bank_ms_per_robot_step"] = min(_time_bank(*args) for _ in range(repeats))
             rows.append(row)
     return rows
 
