@@ -25,7 +25,10 @@ Pipeline of :meth:`FovCbfController.solve`
    ``safety_first=False`` level k holds all four rows of the k-th neighbour (the
    paper). Only neighbours with a possibly active row get a level, and at most
    ``params.max_levels`` FoV levels exist: neighbours beyond the first
-   ``max_levels − 1`` share the last one (their rows trade off in one ‖κ‖²).
+   ``max_levels − 1`` share the last one (their rows trade off in one ‖κ‖²). The FoV
+   rows of neighbours ranked beyond ``params.max_fov_neighbours`` (default 8) are left
+   out altogether (their safety rows stay): a robot cannot keep more neighbours in
+   view, and it bounds the size of the last level's QP in dense teams.
    ``params.safety_hard`` puts the safety rows in a hard level (no κ).
 4. :class:`~fov_marl.control.qp.HierarchicalQP` (cascade whose last candidate is the
    Eq. 19 solution; fallbacks).
@@ -79,7 +82,7 @@ class ControlResult:
             intervention).
         kappa: ``(M, 4)`` minimised violations κ* per neighbour and row, as a fraction
             of the row's input authority (0 for rows that hold or were pruned).
-        active: ``(M, 4)`` rows that entered the QP (not pruned).
+        active: ``(M, 4)`` rows that entered the QP (not pruned or left out).
         level: ``(M, 4)`` priority level of each active row (−1 hard, −2 pruned).
         n_levels: number of priority levels among the active rows.
         n_qp: QPs solved this step (backend ``params.qp_backend``).
@@ -143,7 +146,8 @@ class FovCbfController:
             d: ``(M,)`` ellipse distances; ids: ``(M,)`` tie-breakers.
 
         Returns:
-            ``(M, 4)`` int levels: −2 for inactive rows, −1 hard, 0 safety (with
+            ``(M, 4)`` int levels: −2 for rows left out (pruned, or FoV rows of the
+            neighbours beyond ``params.max_fov_neighbours``), −1 hard, 0 safety (with
             ``safety_first``), 1.. FoV levels.
         """
         p = self.params
@@ -158,6 +162,9 @@ class FovCbfController:
         nb_level = np.empty(M, dtype=np.int64)
         nb_level[order] = 1 + np.minimum(rank, p.max_levels - 1)
         level[:, :] = nb_level[:, None]
+        beyond = np.empty(M, dtype=bool)
+        beyond[order] = rank >= p.max_fov_neighbours
+        level[beyond[:, None] & _FOV_ROWS[None, :]] = -2  # their safety rows stay
         if p.safety_hard:
             level[:, SAFETY_ROW] = -1
         elif p.safety_first:
@@ -251,6 +258,7 @@ class FovCbfController:
                          "total": time.perf_counter() - t0},
             )  # fmt: skip
         level = self.assign_levels(active, d, ids)
+        active = level > -2
         jj, rr = np.nonzero(active)
         t1 = time.perf_counter()
         qres = self.qp.solve(At[jj, rr], bt[jj, rr], level[jj, rr], u_star)

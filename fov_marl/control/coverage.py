@@ -23,13 +23,23 @@ Quadrature
 A fixed stencil of lattice offsets at spacing ``h = params.lloyd_grid_m`` covering
 the disk ``‖o‖ ≤ R_s + h`` is built once (cached) with the exact fraction of each
 ``h × h`` cell inside the disk (16 × 16 supersampling). Per robot the stencil is
-shifted to p_i and each cell weighted by that disk fraction times the linear
-coverage ramp ``clip(½ + s/h, 0, 1)`` of its signed distance ``s`` to the nearest
-polygon edge (arena walls and the Voronoi bisectors of neighbours closer than
-``2 R_s + 2h``): an anti-aliased mask whose error is far below the binary
-mask's (see :func:`fov_marl.control.benchmark.bench_lloyd_resolution`). The
+shifted to p_i and each cell weighted by that disk fraction times, for every other
+edge of the cell (arena walls and the Voronoi bisectors of neighbours closer than
+``2 R_s + 2h``), the linear coverage ramp ``clip(½ + s/h, 0, 1)`` of its signed
+distance ``s`` to that edge: an anti-aliased mask (the product handles corners
+better than one ramp of the smallest distance) whose error is far below a binary
+mask's. Resolution (:func:`fov_marl.control.benchmark.bench_lloyd_resolution`,
+100 cells with up to 11 neighbours, error against the reference): h = 0.25 m:
+mean 0.5 cm, max 3.5 cm, ~100 µs; **h = 0.4 m (default): mean 1.3 cm, p95 3.4 cm,
+max 9 cm, ~80 µs**; h = 0.75 m: mean 4 cm, max 31 cm, ~70 µs. With K_p = 0.8 a 1-3 cm
+centroid error is a 1-3 cm/s error in u* (v_max = 1 m/s), and below 0.4 m the time
+is spent on the stencil, above it on fixed overhead, so 0.4 m is the knee. The
 slow reference :func:`coverage_centroid_reference` integrates the exact convex
-cell in polar coordinates.
+cell in polar coordinates. Per robot the nearest 4 neighbours are applied to the
+whole stencil first; with many more, the points already outside the cell are
+dropped before the rest. The batched form vectorises over robots (padding every
+robot to the largest neighbour count) and falls back to one robot at a time when
+that padding would exceed 4·10⁵ (robot, neighbour, point) triples (dense teams).
 """
 
 from __future__ import annotations
@@ -108,6 +118,8 @@ def lloyd_stencil(sensing_radius_m: float, grid_m: float) -> tuple[np.ndarray, n
 
 #: neighbours applied to the whole stencil before the dropped points are compacted away
 _FIRST_CUTS = 4
+#: above this many (robot, neighbour, stencil point) triples the batch is done per robot
+_BATCH_WORK = 400_000
 
 
 def _ramp(sd: np.ndarray, h: float) -> np.ndarray:
@@ -168,6 +180,12 @@ def coverage_centroids(
     if valid is not None:
         use &= np.asarray(valid, dtype=bool).reshape(dist.shape)
     kmax = int(use.sum(axis=1).max(initial=0))
+    if B > 1 and B * kmax * off.shape[0] > _BATCH_WORK:
+        # dense teams: one robot at a time (own neighbour count and compaction) is
+        # cheaper than padding every robot to the largest neighbour count
+        out = [coverage_centroids(p[i : i + 1], nb[i : i + 1][:, use[i]], None, config, params)
+               for i in range(B)]  # fmt: skip
+        return np.concatenate([o[0] for o in out]), np.concatenate([o[1] for o in out])
     if kmax:
         if B == 1:
             sel = np.flatnonzero(use[0])

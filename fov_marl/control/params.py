@@ -50,6 +50,9 @@ field                        default   source / reason
                                        own level, the rest share the third (bounds the
                                        QPs per step: ≤ 2 per level, 4 levels with the
                                        safety level)
+``max_fov_neighbours``       8         FoV rows of neighbours ranked beyond this (by d)
+                                       are left out (safety rows always stay): bounds
+                                       the last level's QP in dense teams
 ``n_polygon``                16        sides of the polygon inscribed in ``‖v‖ ≤ v_max``
 ``prune``                    True      drop rows that hold for every admissible input
 ``qp_backend``               "nnls"    exact active-set least-distance QPs (scipy);
@@ -123,6 +126,8 @@ class ControllerParams:
             norm ≤ δv in the neighbour's velocity estimate (m/s), [0, 100].
         max_levels: maximum number of FoV cascade levels, in [1, 256]; neighbours
             beyond ``max_levels − 1`` share the last level.
+        max_fov_neighbours: neighbours (ranked by d) whose FoV rows may enter the
+            hierarchy, in [1, 1024]; safety rows are never left out.
         n_polygon: sides of the regular polygon inscribed in the speed disk, [4, 256].
         prune: drop rows that hold for every admissible input before the QPs.
         qp_backend: ``"nnls"`` (exact active set via scipy) or ``"osqp"`` (see
@@ -151,6 +156,7 @@ class ControllerParams:
     safety_hard: bool = False
     safety_speed_margin_mps: float = 0.0
     max_levels: int = 3
+    max_fov_neighbours: int = 8
     n_polygon: int = 16
     prune: bool = True
     qp_backend: str = "nnls"
@@ -181,6 +187,7 @@ class ControllerParams:
         _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)
         _check("safety_speed_margin_mps", self.safety_speed_margin_mps, 0.0, 100.0)
         _check_int("max_levels", self.max_levels, 1, 256)
+        _check_int("max_fov_neighbours", self.max_fov_neighbours, 1, 1024)
         _check_int("n_polygon", self.n_polygon, 4, 256)
         if self.qp_backend not in ("nnls", "osqp"):
             raise ConfigError(

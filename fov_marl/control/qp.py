@@ -131,6 +131,8 @@ _BACKENDS = ("nnls", "osqp")
 #: κ* above which a row counts as violated in the status ("relaxed"); below it is the
 #: O(ρ) bias of the cascade regulariser and solver round-off (normalised units).
 _KAPPA_REPORT = 1e-3
+#: rows closer than this in every normalised coefficient count as the same constraint
+_DUP_TOL = 1e-6
 
 
 def polygon_normals(n: int) -> np.ndarray:
@@ -374,6 +376,26 @@ class HierarchicalQP:
         # rows sorted by level: hard rows first, and the fixed rows are always a prefix
         order = np.argsort(level, kind="stable")
         As, bs, ls = A[order], b[order], level[order]
+        # a row repeating an earlier (same or higher priority) row is the same constraint:
+        # solve without it (duplicates make the QPs degenerate; they arise when several
+        # unseen neighbours' estimates converge on the same point under Eq. 20)
+        key = np.column_stack([As, bs])
+        same = np.abs(key[:, None, :] - key[None, :, :]).max(axis=2) <= _DUP_TOL
+        dup = np.tril(same, -1).any(axis=1)
+        dup_idx = order[dup]
+        if dup.any():
+            keep = ~dup
+            order, As, bs, ls = order[keep], As[keep], bs[keep], ls[keep]
+            R = bs.shape[0]
+
+        def expand(u: np.ndarray, ks: np.ndarray) -> np.ndarray:
+            out = np.zeros(kappa.shape[0])
+            out[order] = ks
+            if dup_idx.size:
+                out[dup_idx] = np.maximum(0.0, -(A[dup_idx] @ u + b[dup_idx]))
+                out[dup_idx[level[dup_idx] < 0]] = 0.0
+            return out
+
         brk = np.flatnonzero(ls[1:] != ls[:-1]) + 1
         starts = np.concatenate(([0], brk)).tolist()
         ends = np.append(brk, R).tolist()
@@ -418,9 +440,8 @@ class HierarchicalQP:
                     if (As[:end] @ u_new - lo_try).min() < -tol:
                         u_new = None
             if u_new is None and hard:  # a hard level that cannot be met: brake
-                kappa[order] = ks
                 return QPResult(
-                    np.zeros(3), kappa, "qp_failed", qp_status, True, n_qp, nlev,
+                    np.zeros(3), expand(u_c, ks), "qp_failed", qp_status, True, n_qp, nlev,
                     time.perf_counter() - t0, 0.0, level,
                 )  # fmt: skip
             if u_new is None:
@@ -453,17 +474,18 @@ class HierarchicalQP:
                 ks[lo_s:end] = np.maximum(0.0, neg[lo_s:end])
             done = end
             u_c = u_new
-        kappa[order] = ks
         t1 = time.perf_counter()
         if n_qp == 0:
-            return QPResult(u_c, kappa, "unconstrained", "", False, 0, nlev, t1 - t0, 0.0, level)
+            return QPResult(
+                u_c, expand(u_c, ks), "unconstrained", "", False, 0, nlev, t1 - t0, 0.0, level
+            )
         if degraded:
             status = "degraded"
         else:
             status = "relaxed" if ks.max() > _KAPPA_REPORT else "solved"
         if is_projection:
             return QPResult(
-                u_c, kappa, status, qp_status, degraded, n_qp, nlev, t1 - t0, 0.0, level
+                u_c, expand(u_c, ks), status, qp_status, degraded, n_qp, nlev, t1 - t0, 0.0, level
             )
         # final QP (Eq. 19) with every κ* fixed
         lo_fix = self._fixed_lo(As, bs, ks, u_c)
@@ -474,11 +496,12 @@ class HierarchicalQP:
             u = self.project(u)
             if (As @ u - lo_fix).min() >= -tol:
                 return QPResult(
-                    u, kappa, status, qp_status, degraded, n_qp, nlev, t1 - t0, t2 - t1, level
-                )
+                    u, expand(u, ks), status, qp_status, degraded, n_qp, nlev, t1 - t0, t2 - t1,
+                    level,
+                )  # fmt: skip
         # the final QP failed: keep the last cascade solution (it meets every level)
         return QPResult(
-            u_c, kappa, "degraded", qp_status, True, n_qp, nlev, t1 - t0, t2 - t1, level
+            u_c, expand(u_c, ks), "degraded", qp_status, True, n_qp, nlev, t1 - t0, t2 - t1, level
         )
 
     # ------------------------------------------------------------------ backends

@@ -25,6 +25,11 @@ Wall-clock cost is kept out of ``infos`` (so equal seeds give equal infos): the
 attribute ``last_cpu_s`` holds the seconds the filter spent on the whole team in the
 last step (tracker + QPs).
 
+The wrapped policy is unknown, so the neighbours' motion model defaults to
+``"static"`` (a random walk: the honest model for arbitrary policies, measured
+calibrated for random motion); the paper's Eq. 20/22 models are selected with
+``tracker_params={"motion_model": "auto"}``.
+
 The particle filters start from the true start poses (the paper's assumption,
 VII-B) read from ``env.unwrapped.poses`` at reset; pass ``init="uniform"`` to avoid
 it. Filter randomness is seeded from the ``seed`` given to :meth:`reset` (child
@@ -75,8 +80,10 @@ class SafetyFilterWrapper(BaseParallelWrapper):
                 "SafetyFilterWrapper needs a fov_marl environment (with .config and .poses), "
                 f"got {type(base).__name__}"
             )
-        if isinstance(tracker_params, dict):
-            tracker_params = TrackerParams(**tracker_params)
+        if tracker_params is None:
+            tracker_params = TrackerParams(motion_model="static")
+        elif isinstance(tracker_params, dict):
+            tracker_params = TrackerParams(**{"motion_model": "static", **tracker_params})
         if isinstance(controller_params, dict):
             controller_params = ControllerParams(**controller_params)
         self.config = base.config

@@ -61,7 +61,7 @@ def test_random_instances_give_finite_admissible_inputs(fov, seed):
 def test_pruning_never_changes_the_solution(seed):
     """Rows pruned in closed form hold for every input: same u and κ with and without."""
     rng = np.random.default_rng(50 + seed)
-    big = dict(max_levels=64)
+    big = dict(max_levels=64, max_fov_neighbours=1024)
     a = FovCbfController(CFG, ControllerParams(prune=True, **big))
     b = FovCbfController(CFG, ControllerParams(prune=False, **big))
     for _ in range(10):
@@ -85,6 +85,11 @@ def test_levels_follow_ascending_distance_and_cap():
     np.testing.assert_array_equal(lev_p[[3, 1, 2, 0]], np.repeat([[1], [2], [3], [4]], 4, axis=1))
     hard = FovCbfController(CFG, ControllerParams(safety_hard=True))
     assert np.all(hard.assign_levels(active, d, np.arange(4))[:, 2] == -1)
+    # FoV rows beyond max_fov_neighbours are left out; their safety rows stay
+    few = FovCbfController(CFG, ControllerParams(max_fov_neighbours=2, prune=False))
+    lev_f = few.assign_levels(active, d, np.arange(4))
+    np.testing.assert_array_equal(lev_f[[2, 0]][:, [0, 1, 3]], -2)
+    assert np.all(lev_f[[3, 1]][:, [0, 1, 3]] >= 1) and np.all(lev_f[:, 2] == 0)
     # ties in d are broken by id
     lev_t = paper.assign_levels(active[:2], np.array([1.0, 1.0]), np.array([7, 3]))
     np.testing.assert_array_equal(lev_t[:, 0], [2, 1])

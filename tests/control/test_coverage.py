@@ -63,9 +63,9 @@ def test_centroid_matches_reference(h, tol_mean, tol_max):
     assert np.median(merr) < 0.01
 
 
-def test_batched_equals_per_robot_and_respects_valid_mask():
+@pytest.mark.parametrize(("B", "M"), [(7, 9), (40, 39)])  # vectorised and per-robot paths
+def test_batched_equals_per_robot_and_respects_valid_mask(B, M):
     rng = np.random.default_rng(1)
-    B, M = 7, 9
     p = rng.uniform(3, 37, (B, 2))
     nb = p[:, None, :] + rng.normal(0, 4, (B, M, 2))
     valid = rng.uniform(size=(B, M)) < 0.7
