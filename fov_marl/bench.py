@@ -101,7 +101,12 @@ def run_benchmarks(
     try:
         from fov_marl.estimation.benchmark import bench_tracker
 
-        for r in bench_tracker(n_agents=ns, steps=20 if quick else 100):
+        for r in bench_tracker(
+            p_totals=(1000, 2000, 5000),
+            n_agents=sorted({6, 12, 48} & set(ns)) or ns,
+            steps=20 if quick else 100,
+            repeats=1 if quick else 3,
+        ):
             rows.append({"section": "tracker", **r})
     except ImportError:
         pass
@@ -113,7 +118,8 @@ def run_benchmarks(
     except ImportError:
         pass
     try:
-        rows.extend(bench_controller(n_agents=ns, steps=20 if quick else 60))
+        big = () if n_agents else (200,)  # the team-step target at N = 200
+        rows.extend(bench_controller(n_agents=ns + big, steps=20 if quick else 60))
     except ValueError:  # pfcbf not registered
         pass
     return rows

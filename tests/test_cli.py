@@ -129,3 +129,24 @@ def test_render_writes_a_gif(tmp_path):
     with Image.open(out) as im:
         assert im.n_frames == 3
         assert im.size == (640, 640)
+
+
+def test_bench_json_reports_every_layer(capsys):
+    assert main(["bench", "--quick", "--n-agents", "6", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    sections = {r["section"] for r in rows}
+    assert sections == {"env", "tracker", "control", "controller"}
+    ctrl = [r for r in rows if r["section"] == "controller"]
+    assert ctrl[0]["n_agents"] == 6 and ctrl[0]["ms_per_robot_step"] > 0
+    assert {"tracker_ms", "lloyd_ms", "qp_ms"} <= set(ctrl[0])
+    env6 = [r for r in rows if r["section"] == "env" and r["n_agents"] == 6]
+    assert env6 and env6[0]["agent_steps_per_s"] > 0
+
+
+def test_evaluate_pfcbf_with_safety_filter_flag(tmp_path):
+    args = _eval_args(tmp_path, policy="pfcbf", extra=("--safety-filter",))
+    assert main(args) == 0
+    data = json.loads((tmp_path / "results.json").read_text())
+    ep = data["episodes"][0]
+    assert ep["policy"] == "pfcbf" and ep["collisions"] == 0
+    assert ep["filter_interventions"] is not None and ep["cpu_ms_per_robot_step"] > 0
