@@ -316,3 +316,25 @@ def test_collision_totals_count_events_not_steps():
     env.step({"robot_0": -fwd, "robot_1": -fwd})  # apart
     *_, infos = env.step({"robot_0": fwd, "robot_1": fwd})  # second contact
     assert infos["robot_0"]["metrics"]["collisions_total"] == 2
+
+
+@settings(max_examples=30)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    n=st.integers(2, 10),
+    fov=st.floats(1.0, 360.0),
+    range_m=st.floats(1.0, 30.0),
+)
+def test_camera_never_reports_a_neighbour_outside_the_sector(seed, n, fov, range_m):
+    env = fov_coverage_v0.parallel_env(n_agents=n, fov_deg=fov, detection_range_m=range_m)
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    for _ in range(5):
+        rel = relative_pose(env.poses)
+        for i, a in enumerate(env.possible_agents):
+            lay = ObservationLayout(n, i)
+            det = lay.slots(obs[a])[:, 0] > 0.5
+            truth = in_fov(rel[i, lay.neighbour_ids, :2], np.radians(fov), range_m)
+            assert not np.any(det & ~truth)  # never outside F_i
+            assert np.array_equal(det, truth)  # and everything inside is reported
+        obs, *_ = env.step({a: rng.uniform(-1, 1, 3) for a in env.agents})

@@ -44,10 +44,11 @@ def test_aec_api(mod, n, fov):
 
 
 @pytest.mark.parametrize("mod", MODULES, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
-@pytest.mark.parametrize("n", [1, 6])
-def test_seed(mod, n):
-    seed_test(functools.partial(mod.env, **_small(mod, n, 120.0)), num_cycles=30)
-    parallel_seed_test(functools.partial(mod.parallel_env, **_small(mod, n, 120.0)), num_cycles=30)
+@pytest.mark.parametrize("n", N_AGENTS)
+@pytest.mark.parametrize("fov", FOVS)
+def test_seed(mod, n, fov):
+    seed_test(functools.partial(mod.env, **_small(mod, n, fov)), num_cycles=20)
+    parallel_seed_test(functools.partial(mod.parallel_env, **_small(mod, n, fov)), num_cycles=20)
 
 
 @pytest.mark.parametrize("mod", MODULES, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
@@ -56,15 +57,17 @@ def test_max_cycles(mod):
 
 
 @pytest.mark.parametrize("mod", MODULES, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
-@pytest.mark.parametrize("n", [2, 6])
-def test_render(mod, n):
-    render_test(functools.partial(mod.env, **_small(mod, n, 120.0)))
+@pytest.mark.parametrize("n", N_AGENTS)
+@pytest.mark.parametrize("fov", FOVS)
+def test_render(mod, n, fov):
+    render_test(functools.partial(mod.env, **_small(mod, n, fov)))
 
 
 @pytest.mark.parametrize("mod", MODULES, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
 @pytest.mark.parametrize("n", N_AGENTS)
-def test_state(mod, n):
-    state_test(mod.env(**_small(mod, n, 120.0)), mod.parallel_env(**_small(mod, n, 120.0)))
+@pytest.mark.parametrize("fov", FOVS)
+def test_state(mod, n, fov):
+    state_test(mod.env(**_small(mod, n, fov)), mod.parallel_env(**_small(mod, n, fov)))
 
 
 @pytest.mark.parametrize("mod", MODULES, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
