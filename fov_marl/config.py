@@ -49,46 +49,15 @@ from typing import Any, Literal
 
 import numpy as np
 
+from fov_marl.validation import ConfigError, check_int, check_real
+
 __all__ = ["ConfigError", "ScenarioConfig", "make_config"]
 
 Scenario = Literal["coverage", "crossing"]
 
 
-class ConfigError(ValueError):
-    """A configuration field is missing, unknown or out of its allowed range."""
-
-
-def _check_range(
-    name: str,
-    value: float,
-    lo: float | None = None,
-    hi: float | None = None,
-    *,
-    lo_open: bool = False,
-    hi_open: bool = False,
-) -> None:
-    """Raise :class:`ConfigError` unless ``value`` is finite and inside the interval."""
-    lo_b = "(" if lo_open else "["
-    hi_b = ")" if hi_open or hi is None else "]"
-    allowed = f"{lo_b}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{hi_b}"
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a real number in {allowed}, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ConfigError(f"{name} must be finite and in {allowed}, got {value!r}")
-    if lo is not None and (v < lo or (lo_open and v == lo)):
-        raise ConfigError(f"{name} must be in {allowed}, got {value!r}")
-    if hi is not None and (v > hi or (hi_open and v == hi)):
-        raise ConfigError(f"{name} must be in {allowed}, got {value!r}")
-
-
-def _check_int(name: str, value: Any, lo: int, hi: int | None = None) -> None:
-    allowed = f"[{lo}, inf)" if hi is None else f"[{lo}, {hi}]"
-    if isinstance(value, bool) or not isinstance(value, int | np.integer):
-        raise ConfigError(f"{name} must be an integer in {allowed}, got {value!r}")
-    if value < lo or (hi is not None and value > hi):
-        raise ConfigError(f"{name} must be an integer in {allowed}, got {value!r}")
+_check_range = check_real
+_check_int = check_int
 
 
 @dataclass(frozen=True)

@@ -58,7 +58,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
-import numpy as np
+from fov_marl.validation import check_int, check_real
 
 __all__ = ["TrackerParams", "MotionModel", "InitMode", "EgoMotion"]
 
@@ -72,31 +72,10 @@ _EGO_MOTIONS = ("action", "pose")
 
 
 def _real(name: str, value: Any, lo: float, hi: float | None, lo_open: bool, hi_open: bool = False):
-    allowed = (
-        f"{'(' if lo_open else '['}{lo}, {'inf' if hi is None else hi}{')' if hi_open else ']'}"
-    )
-    if isinstance(value, bool):
-        raise ValueError(f"{name} must be a real number in {allowed}, got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a real number in {allowed}, got {value!r}") from None
-    bad = (
-        not math.isfinite(v)
-        or v < lo
-        or (lo_open and v == lo)
-        or (hi is not None and (v > hi or (hi_open and v == hi)))
-    )
-    if bad:
-        raise ValueError(f"{name} must be in {allowed}, got {value!r}")
+    check_real(name, value, lo, hi, lo_open=lo_open, hi_open=hi_open)
 
 
-def _integer(name: str, value: Any, lo: int, hi: int | None = None) -> None:
-    allowed = f"[{lo}, {'inf' if hi is None else hi}]"
-    if isinstance(value, bool) or not isinstance(value, int | np.integer):
-        raise ValueError(f"{name} must be an integer in {allowed}, got {value!r}")
-    if value < lo or (hi is not None and value > hi):
-        raise ValueError(f"{name} must be an integer in {allowed}, got {value!r}")
+_integer = check_int
 
 
 @dataclass(frozen=True)
