@@ -188,7 +188,7 @@ class FovEnvBase(ParallelEnv):
         missing = [a for a in self.agents if a not in actions]
         if missing:
             raise ValueError(f"actions missing for agent(s) {missing}")
-        out = np.empty((self.config.n_agents, 3))
+        out = np.zeros((self.config.n_agents, 3))
         for a in self.agents:
             try:
                 x = np.asarray(actions[a], dtype=np.float64)
@@ -198,9 +198,13 @@ class FovEnvBase(ParallelEnv):
                 ) from None
             if x.shape != (3,):
                 raise ValueError(f"action of {a} must have shape (3,), got shape {x.shape}")
-            if not np.all(np.isfinite(x)):
-                raise ValueError(f"action of {a} must be finite, got {x.tolist()}")
             out[self.agent_name_mapping[a]] = x
+        finite = np.isfinite(out).all(axis=1)
+        if not finite.all():
+            for a in self.agents:
+                i = self.agent_name_mapping[a]
+                if not finite[i]:
+                    raise ValueError(f"action of {a} must be finite, got {out[i].tolist()}")
         return out
 
     def _step_metrics_common(self) -> dict[str, Any]:
