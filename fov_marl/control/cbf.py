@@ -85,6 +85,47 @@ FoV). With ``slack_zero_below_ds`` (default) we use the sigmoid shifted and
 rescaled to ``(σ(s(d−3D_s)) − σ₀)/(1 − σ₀)``, ``σ₀ = σ(−2 s D_s)``, clipped at 0, so
 ε = 0 for d ≤ D_s, ε → h_max for d → ∞, and ε(3 D_s) = h_max (½ − σ₀)/(1 − σ₀)
 (0.491 h_max with the defaults), matching the description of Fig. 3.
+
+Recovering a neighbour's view by turning (``ControllerParams.fov_recovery_cap``)
+=============================================================================
+
+Theorem 1 (Eq. 13-15) makes a violated row attractive: ``ḣ ≥ −α(h)`` with h < 0 asks
+for a positive ḣ, from *any* input. For the FoV rows that is a poor guide once the
+neighbour is well out of view. The rows are linear in ⁱp_j, so moving towards a
+neighbour behind the robot raises ``t x ± y`` without turning the camera towards it;
+a mean beyond R_d (where the deletion of Eq. 4 puts every undetected neighbour the
+robot looks for, since the FoV holds no particle of it) makes the range row drag the
+robot towards it; and in the back cone the two border rows disagree on the way to
+turn (one of them first decreases along the shortest turn), so the level is
+infeasible and the cascade (Eq. 18) spends all inputs, translation included, on
+reducing its violation. Measured with the paper's rows: four crossing robots under
+Eq. 22 dragged 8-18 m off their targets for minutes by neighbours' means behind them
+or just beyond R_d (one of seeds 0-4 arrived within 200 s); a coverage robot backed
+blind into a neighbour while "looking" for another one's mean behind it.
+
+Searching (Section VI-B) is what the camera does, so with ``c = fov_recovery_cap > 0``
+a FoV row in *recovery* (``h_r + ε_r < 0``: the neighbour's mean outside the sector
+shrunk by ε, or beyond R_d) keeps only its rotation term and demands at most what
+rotation delivers::
+
+    A_r ← [0, 0, A_r,ω],   b_r ← max(b_r, −c |A_r,ω| ω_max)          (r = 0, 1, 3)
+
+In the back cone (both border rows in recovery, ω terms of opposite signs) the row
+whose ω term opposes ``sign(ⁱy_j)`` is dropped, so both agree on turning towards the
+side j is on. The range row has no rotation term: in recovery it is void (the robot
+never chases a mean beyond R_d; rows are void by marking them inactive, h = b = +inf).
+Rows that hold (``h + ε ≥ 0``, j in view) are exactly Eq. 17's and keep j in view
+(forward invariance) against every input, translation included; the safety row is
+never changed. V = −h still decreases (Eq. 14-15) whenever the robot turns towards j
+at ≥ c ω_max. With these rows all of crossing seeds 0-9 arrive in 33-59 s and 20
+coverage seeds keep ≥ 2.2 m.
+
+Motion cone ("look where you go", ``ControllerParams.motion_cone``)
+===================================================================
+
+Not in the paper; see :func:`motion_cone_rows`. Used by
+:class:`~fov_marl.wrappers.SafetyFilterWrapper`, where an arbitrary policy may drive a
+robot towards neighbours it cannot see (and whose estimates are then stale).
 """
 
 from __future__ import annotations
@@ -111,6 +152,7 @@ __all__ = [
     "cbf_rows",
     "row_authority",
     "normalise_rows",
+    "motion_cone_rows",
 ]
 
 #: Names of the four rows of Eq. 12, in the order used everywhere.
@@ -325,10 +367,12 @@ class CbfRows:
     """Constraint rows ``A u + b ≥ 0`` of Eq. 17 for the ``M`` neighbours of one robot.
 
     Attributes:
-        A: ``(M, 4, 3)`` Lie-derivative rows (units of h per unit input).
+        A: ``(M, 4, 3)`` Lie-derivative rows (units of h per unit input); FoV rows in
+            recovery keep only their ω term (module docstring).
         b: ``(M, 4)`` ``drift + α(h + ε)`` (units of h per second), with the safety
-            margin applied to row 2; +inf for inactive rows.
-        h: ``(M, 4)`` barrier values (Eq. 12).
+            margin applied to row 2 and the recovery floor to FoV rows in recovery;
+            +inf for inactive (and void) rows.
+        h: ``(M, 4)`` barrier values (Eq. 12); +inf for inactive (and void) rows.
         eps: ``(M, 4)`` slack ε (Eq. 16-17).
     """
 
@@ -347,6 +391,9 @@ def cbf_rows(
     h_max: np.ndarray | None = None,
 ) -> CbfRows:
     """Assemble the rows of Eq. 17 in our reading: ``A u + drift + α(h + ε) ≥ 0``.
+
+    FoV rows in recovery (``h + ε < 0``) are then reduced to their rotation term
+    (``params.fov_recovery_cap``, module docstring; 0 keeps the paper's rows).
 
     h comes from :func:`fov_barrier` with ``params.fov_margin_m`` (the FoV rows keep
     the neighbour that far inside the sector, absorbing the discrete-time overshoot
@@ -374,10 +421,59 @@ def cbf_rows(
     A, drift = fov_barrier_lie(p_body, v_est_body, config.fov_rad)
     eps = slack(d, config, params, h_max)
     b = drift + class_k(h + eps, params)
+    if params.fov_recovery_cap > 0.0:
+        A, b, h = _recover_by_rotation(A, b, h, eps, p_body, config, params.fov_recovery_cap)
     if params.safety_speed_margin_mps > 0.0:
         p = np.asarray(p_body, dtype=np.float64)
         b[:, SAFETY_ROW] -= 2.0 * params.safety_speed_margin_mps * np.hypot(p[:, 0], p[:, 1])
     return CbfRows(A=A, b=b, h=h, eps=eps)
+
+
+def _recover_by_rotation(
+    A: np.ndarray,
+    b: np.ndarray,
+    h: np.ndarray,
+    eps: np.ndarray,
+    p_body: np.ndarray,
+    config: ScenarioConfig,
+    cap: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """FoV rows in recovery turn the camera and never drive the robot (see :func:`cbf_rows`).
+
+    Rows 0, 1, 3 with ``h + ε < 0`` lose their translational coefficients and demand at
+    most ``cap · |A_ω| ω_max``, what rotation delivers. In the back cone, where both
+    border rows are in recovery, the one whose ω coefficient opposes ``sign(y)`` (the
+    way to turn towards j) loses its ω coefficient too. A row left without coefficients
+    (the range row in recovery, that border row) is void: marked inactive like the
+    unused slots of :func:`fov_barrier` (``h = b = +inf``, ``A = 0``).
+
+    Returns:
+        ``(A, b, h)``, new arrays.
+    """
+    A = A.copy()
+    b = b.copy()
+    h = h.copy()
+    fov = [0, 1, 3]
+    rec = np.isfinite(h[:, fov]) & (h[:, fov] + eps[:, fov] < 0.0)
+    if not rec.any():
+        return A, b, h
+    Af = A[:, fov, :]
+    Af[..., 0:2] = np.where(rec[..., None], 0.0, Af[..., 0:2])
+    y = np.asarray(p_body, dtype=np.float64)[:, 1]
+    both = rec[:, 0] & rec[:, 1]
+    for k in (0, 1):
+        wrong = both & (Af[:, k, 2] * y < 0.0)
+        Af[wrong, k, 2] = 0.0
+    floor = -cap * np.abs(Af[..., 2]) * config.omega_max_radps
+    bf = np.where(rec, np.maximum(b[:, fov], floor), b[:, fov])
+    void = rec & (Af[..., 2] == 0.0)
+    bf[void] = np.inf
+    hf = h[:, fov]
+    hf[void] = np.inf
+    A[:, fov, :] = Af
+    b[:, fov] = bf
+    h[:, fov] = hf
+    return A, b, h
 
 
 def row_authority(A: np.ndarray, v_max: float, omega_max: float) -> np.ndarray:
@@ -421,3 +517,48 @@ def normalise_rows(
     with np.errstate(invalid="ignore"):
         bt = np.clip(np.asarray(b, dtype=np.float64) / a, -clip, clip)
     return np.asarray(A, dtype=np.float64) / a[..., None], bt, a
+
+
+def motion_cone_rows(
+    fov_rad: float, blind_speed_mps: float, v_max_mps: float, half_angle_rad: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """ "Look where you go": input rows ``G u ≥ h`` keeping fast motion where the camera looks.
+
+    Not in the paper: an addition for collision avoidance (see the module docstring
+    of :mod:`~fov_marl.control.params`, ``motion_cone``). The admissible planar
+    velocities become the convex hull of the small disk ``‖v‖ ≤ v_b``
+    (``v_b = blind_speed_mps``, allowed in every direction) and the full-speed cone
+    ``‖v‖ ≤ v_max, |∠v| ≤ a`` around the camera axis (body x), with
+    ``a = min(β/2, half_angle_rad)`` inside the camera sector F_i. A robot thus moves
+    faster than v_b only towards what it sees, so two robots that cannot see each
+    other close in on each other at no more than about 2 v_b.
+
+    The hull is described by five half-planes ``n_k · v ≤ v_b`` tangent to the small
+    disk, with outward unit normals at the angles ``±ψ``, ``±(ψ + π)/2`` and π,
+    ``ψ = a + acos(v_b / v_max)``: the ``±ψ`` sides pass through the full-speed
+    corners ``v_max (cos a, ±sin a)``; the other three close the hull behind the
+    robot (the ``±ψ`` sides alone would meet ``v_b / |cos ψ|`` behind it). With
+    v_b = 0.05 m/s and a = 20° the speed allowed at 30° off the axis is 0.22 m/s, at
+    45° 0.11 m/s and beyond 90° v_b. Rows are returned as ``G u ≥ h`` with ``G = −n``,
+    ``h = −v_b``: ``u = 0`` always satisfies them (braking stays admissible).
+
+    Args:
+        fov_rad: β in (0, 2π]; β = 2π (isotropic camera) gives no rows.
+        blind_speed_mps: v_b in [0, v_max] (m/s).
+        v_max_mps: speed limit (m/s).
+        half_angle_rad: half-angle of the full-speed cone, in (0, π); capped at β/2.
+
+    Returns:
+        ``(G (k, 3), h (k,))`` with ``k`` 0 or 5; ``G[:, 2] = 0``.
+    """
+    if fov_rad >= 2.0 * math.pi:
+        return np.zeros((0, 3)), np.zeros(0)
+    a = min(0.5 * fov_rad, half_angle_rad)
+    vb = min(max(blind_speed_mps, 0.0), v_max_mps)
+    psi = min(a + math.acos(vb / v_max_mps), math.pi)
+    mid = 0.5 * (psi + math.pi)
+    ang = np.array([psi, mid, math.pi, -mid, -psi])
+    G = np.zeros((5, 3))
+    G[:, 0] = -np.cos(ang)
+    G[:, 1] = -np.sin(ang)
+    return G, np.full(5, -vb)

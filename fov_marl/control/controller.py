@@ -13,11 +13,19 @@ convert with :func:`fov_marl.spaces.velocity_to_action` (and
 Pipeline of :meth:`FovCbfController.solve`
 ==========================================
 
-1. Rows ``A u + drift + α(h + ε) ≥ 0`` for every neighbour (:func:`~fov_marl.control.cbf.cbf_rows`).
+0. "Look where you go" (``params.motion_cone``, not in the paper; only with
+   neighbours, M > 0): when u*'s translation points outside the full-speed cone, u*'s
+   yaw rate is replaced by ``look_gain`` times the bearing of that translation
+   (:meth:`FovCbfController.look_where_you_go`; the cone itself is a level, step 3).
+1. Rows ``A u + drift + α(h + ε) ≥ 0`` for every neighbour (:func:`~fov_marl.control.cbf.cbf_rows`);
+   FoV rows of a neighbour out of view recover by turning only
+   (``params.fov_recovery_cap``, see :mod:`~fov_marl.control.cbf`).
 2. Normalise each row by its input authority and prune the rows that hold for every
    admissible input (``b̃ ≥ 1``, the closed form ``drift + α(h + ε) − ‖A_v‖ v_max −
    |A_ω| ω_max ≥ 0``; exact, see :func:`~fov_marl.control.cbf.row_authority`).
-3. Priority levels (Eq. 18): neighbours sorted by ascending d_ij (ties: ascending id).
+3. Priority levels (Eq. 18): neighbours sorted by ascending d_ij (ties: ascending
+   distance to the mean ‖ⁱp_j‖, then id: several far-reaching ellipses all give
+   d = 0, and the nearest of those neighbours is the one to look at).
    With ``params.safety_first`` (default) level 0 holds the safety rows of *every*
    neighbour, so avoiding a collision with any neighbour outranks keeping the nearest
    one in view; level 1, 2, … hold the FoV rows (left, right, range) of the
@@ -30,6 +38,11 @@ Pipeline of :meth:`FovCbfController.solve`
    out altogether (their safety rows stay): a robot cannot keep more neighbours in
    view, and it bounds the size of the last level's QP in dense teams.
    ``params.safety_hard`` puts the safety rows in a hard level (no κ).
+   With ``params.motion_cone`` the rows of
+   :func:`~fov_marl.control.cbf.motion_cone_rows` form their own level right below
+   the safety rows (above every FoV level; the lowest level when ``safety_first`` is
+   False and safety is soft): a robot moves faster than ``blind_speed_mps`` only
+   where its camera looks, unless avoiding a collision needs it.
 4. :class:`~fov_marl.control.qp.HierarchicalQP` (cascade whose last candidate is the
    Eq. 19 solution; fallbacks).
 
@@ -53,7 +66,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fov_marl.config import ScenarioConfig
-from fov_marl.control.cbf import SAFETY_ROW, cbf_rows, normalise_rows, row_h_max
+from fov_marl.control.cbf import (
+    SAFETY_ROW,
+    cbf_rows,
+    motion_cone_rows,
+    normalise_rows,
+    row_h_max,
+)
 from fov_marl.control.params import ControllerParams
 from fov_marl.control.qp import HierarchicalQP
 
@@ -69,7 +88,8 @@ class ControlResult:
     Attributes:
         u: ``(3,)`` applied body-frame velocity ``[vx m/s, vy m/s, ω rad/s]``, always
             finite with ``‖(vx, vy)‖ ≤ v_max`` and ``|ω| ≤ ω_max``.
-        u_star: ``(3,)`` the desired input as given.
+        u_star: ``(3,)`` the desired input as given (before the look-where-you-go
+            yaw rate of step 0).
         status: ``"unconstrained"`` (u* projected on the admissible set satisfies every
             row, no QP), ``"solved"`` (all rows hold), ``"relaxed"`` (the hierarchy had
             to violate some rows, κ* > 1e-3), ``"degraded"`` (a QP failed; u is the
@@ -83,11 +103,14 @@ class ControlResult:
         kappa: ``(M, 4)`` minimised violations κ* per neighbour and row, as a fraction
             of the row's input authority (0 for rows that hold or were pruned).
         active: ``(M, 4)`` rows that entered the QP (not pruned or left out).
-        level: ``(M, 4)`` priority level of each active row (−1 hard, −2 pruned).
+        level: ``(M, 4)`` priority level of each active row (−1 hard, −2 pruned), as
+            solved (with the motion cone, FoV levels are shifted below its level).
         n_levels: number of priority levels among the active rows.
         n_qp: QPs solved this step (backend ``params.qp_backend``).
         qp_status: the backend's status string of the last QP ("" if none).
         safety_violation: max κ* over the safety rows (0 when collision avoidance holds).
+        cone_violation: max κ* over the motion-cone rows (0 when the robot moves
+            faster than ``blind_speed_mps`` only inside the cone, or without the cone).
         timings: seconds spent in ``rows`` (assembly, pruning, levels), ``cascade``,
             ``final`` (only after a failed level), ``total``.
     """
@@ -104,6 +127,7 @@ class ControlResult:
     n_qp: int = 0
     qp_status: str = ""
     safety_violation: float = 0.0
+    cone_violation: float = 0.0
     timings: dict = field(default_factory=dict)
 
 
@@ -126,6 +150,20 @@ class FovCbfController:
         self.params = params if params is not None else ControllerParams()
         self.h_max = row_h_max(config, self.params.fov_margin_m)
         p = self.params
+        # motion cone rows normalised like the CBF rows (authority ‖G_v‖ v_max = v_max)
+        G, h = motion_cone_rows(
+            config.fov_rad,
+            p.blind_speed_mps,
+            config.v_max_mps,
+            math.radians(p.cone_half_angle_deg),
+        )
+        self._cone_A = G / config.v_max_mps if p.motion_cone else np.zeros((0, 3))
+        self._cone_b = -h / config.v_max_mps if p.motion_cone else np.zeros(0)
+        self._cone_half_angle = (
+            min(0.5 * config.fov_rad, math.radians(p.cone_half_angle_deg))
+            if self._cone_b.shape[0]
+            else math.pi
+        )
         self.qp = HierarchicalQP(
             config.v_max_mps,
             config.omega_max_radps,
@@ -138,12 +176,19 @@ class FovCbfController:
         )
         self.stats = {"steps": 0, "fallbacks": 0, "qp_solves": 0, "interventions": 0, "relaxed": 0}
 
-    def assign_levels(self, active: np.ndarray, d: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    def assign_levels(
+        self,
+        active: np.ndarray,
+        d: np.ndarray,
+        ids: np.ndarray,
+        r: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Priority level of every row (Eq. 18), see the module docstring.
 
         Args:
             active: ``(M, 4)`` rows that enter the QP.
-            d: ``(M,)`` ellipse distances; ids: ``(M,)`` tie-breakers.
+            d: ``(M,)`` ellipse distances; ids: ``(M,)`` last tie-breakers.
+            r: ``(M,)`` distances to the means, first tie-breakers (None: ids only).
 
         Returns:
             ``(M, 4)`` int levels: −2 for rows left out (pruned, or FoV rows of the
@@ -155,7 +200,7 @@ class FovCbfController:
         level = np.full((M, 4), -2, dtype=np.int64)
         if M == 0:
             return level
-        order = np.lexsort((ids, d))
+        order = np.lexsort((ids, d)) if r is None else np.lexsort((ids, r, d))
         per_nb_rows = _FOV_ROWS if p.safety_first else np.ones(4, dtype=bool)
         cand = np.any(active & per_nb_rows, axis=1)[order]
         rank = np.cumsum(cand) - 1
@@ -171,6 +216,33 @@ class FovCbfController:
             level[:, SAFETY_ROW] = 0
         level[~active] = -2
         return level
+
+    def look_where_you_go(self, u_star: np.ndarray) -> np.ndarray:
+        """Step 0 of :meth:`solve`: turn the camera towards a desired translation it cannot see.
+
+        When ``‖v*‖ > blind_speed_mps`` and the bearing ``φ = atan2(v*_y, v*_x)`` lies
+        outside the full-speed cone (``|φ| > a``, see
+        :func:`~fov_marl.control.cbf.motion_cone_rows`), the desired yaw rate becomes
+        ``sat_{ω_max}(look_gain · φ)``; otherwise u* is returned unchanged. The motion
+        cone only lets the robot go where it looks; this makes it look where it wants
+        to go (with ω* = 0, e.g. from a policy that never turns, a robot could
+        otherwise only creep at ``blind_speed_mps`` towards a goal behind it).
+
+        Args:
+            u_star: ``(3,)`` finite desired input.
+
+        Returns:
+            ``(3,)`` desired input (a new array when changed).
+        """
+        p, cfg = self.params, self.config
+        if math.hypot(u_star[0], u_star[1]) <= p.blind_speed_mps:
+            return u_star
+        phi = math.atan2(u_star[1], u_star[0])
+        if abs(phi) <= self._cone_half_angle:
+            return u_star
+        out = np.array(u_star, dtype=np.float64)
+        out[2] = min(max(p.look_gain * phi, -cfg.omega_max_radps), cfg.omega_max_radps)
+        return out
 
     def solve(
         self,
@@ -239,15 +311,21 @@ class FovCbfController:
                 timings={"rows": 0.0, "cascade": 0.0, "final": 0.0,
                          "total": time.perf_counter() - t0},
             )  # fmt: skip
+        u_given = u_star
+        n_cone = self._cone_b.shape[0] if M else 0  # alone, there is no one to run into
+        if n_cone and p.look_gain > 0.0:
+            u_star = self.look_where_you_go(u_star)
         rows = cbf_rows(p_body, v_est_body, d, cfg, p, self.h_max)
         At, bt, _ = normalise_rows(rows.A, rows.b, cfg.v_max_mps, cfg.omega_max_radps, p.row_clip)
         active = bt < 1.0 if p.prune else np.isfinite(rows.h)
         u_proj = self.qp.project(u_star)
         st = self.stats
-        if not active.any():  # every row holds for every admissible input
+        if not active.any() and (
+            n_cone == 0 or (self._cone_A @ u_proj + self._cone_b).min() >= 0.0
+        ):  # every row holds for every admissible input, and u* is inside the cone
             return ControlResult(
                 u=u_proj,
-                u_star=u_star,
+                u_star=u_given,
                 status="unconstrained",
                 fallback=False,
                 intervened=False,
@@ -257,12 +335,23 @@ class FovCbfController:
                 timings={"rows": time.perf_counter() - t0, "cascade": 0.0, "final": 0.0,
                          "total": time.perf_counter() - t0},
             )  # fmt: skip
-        level = self.assign_levels(active, d, ids)
+        level = self.assign_levels(active, d, ids, np.hypot(p_body[:, 0], p_body[:, 1]))
         active = level > -2
         jj, rr = np.nonzero(active)
         t1 = time.perf_counter()
-        qres = self.qp.solve(At[jj, rr], bt[jj, rr], level[jj, rr], u_star)
-        kappa[jj, rr] = qres.kappa
+        A_q, b_q, l_q = At[jj, rr], bt[jj, rr], level[jj, rr]
+        if n_cone:
+            if p.safety_first or p.safety_hard:  # right below the safety level
+                level[level >= 1] += 1
+                l_q = np.where(l_q >= 1, l_q + 1, l_q)
+                l_cone = 1
+            else:  # the paper's per-neighbour levels: below all of them
+                l_cone = int(l_q.max(initial=0)) + 1
+            A_q = np.concatenate([A_q, self._cone_A])
+            b_q = np.concatenate([b_q, self._cone_b])
+            l_q = np.concatenate([l_q, np.full(n_cone, l_cone, dtype=l_q.dtype)])
+        qres = self.qp.solve(A_q, b_q, l_q, u_star)
+        kappa[jj, rr] = qres.kappa[: jj.size]
         u = qres.u
         du = u - u_proj
         intervened = bool(math.sqrt(float(du @ du)) > p.intervention_tol)
@@ -272,7 +361,7 @@ class FovCbfController:
         st["relaxed"] += int(qres.status == "relaxed")
         return ControlResult(
             u=u,
-            u_star=u_star,
+            u_star=u_given,
             status=qres.status,
             fallback=qres.fallback,
             intervened=intervened,
@@ -283,6 +372,7 @@ class FovCbfController:
             n_qp=qres.n_qp,
             qp_status=qres.qp_status,
             safety_violation=float(kappa[:, SAFETY_ROW].max(initial=0.0)),
+            cone_violation=float(qres.kappa[jj.size :].max(initial=0.0)),
             timings={
                 "rows": t1 - t0,
                 "cascade": qres.t_cascade_s,

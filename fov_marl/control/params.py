@@ -44,7 +44,42 @@ field                        default   source / reason
                                        controller`)
 ``safety_hard``              False     True: safety rows take no κ (infeasible → brake)
 ``safety_speed_margin_mps``  0.0       robust margin on the neighbour's speed estimate
-                                       (paper: 0); see :func:`~fov_marl.control.cbf.cbf_rows`
+                                       (paper: 0); see :func:`~fov_marl.control.cbf.cbf_rows`.
+                                       :class:`~fov_marl.wrappers.SafetyFilterWrapper`
+                                       uses 0.5
+``fov_recovery_cap``         0.8       c: a FoV row that is violated (h + ε < 0, the
+                                       neighbour out of view or its mean beyond R_d) is
+                                       *recovered by turning the camera*: its translation
+                                       terms are dropped and it demands at most
+                                       ``c |A_ω| ω_max`` (the range row, which rotation
+                                       cannot repair, is void); see
+                                       :func:`~fov_marl.control.cbf.cbf_rows`. 0: the paper
+                                       (Theorem 1's recovery with every input). Measured:
+                                       the paper's rows dragged crossing robots up to 15 m
+                                       off their targets (4 robots, Eq. 22: 1 of seeds 0-4
+                                       arrived within 200 s; with c = 0.8 all of seeds 0-9
+                                       in 33-59 s) and backed a coverage robot blind into a
+                                       neighbour (seed 18, 0.94 m; 20 seeds now ≥ 2.2 m).
+                                       c < 1 leaves ``(1 − c)`` of the turn rate to spare
+``motion_cone``              False     "look where you go" (not in the paper): a level right
+                                       below the safety rows keeps planar speed ≤
+                                       ``blind_speed_mps`` outside ±``cone_half_angle_deg``
+                                       of the camera axis (:func:`~fov_marl.control.cbf.
+                                       motion_cone_rows`). Off for ``pfcbf``
+                                       (it deadlocks the dense crossing encounter: a robot
+                                       holding a neighbour in view can only creep to its
+                                       goal), on in :class:`~fov_marl.wrappers.
+                                       SafetyFilterWrapper`, whose arbitrary policies
+                                       otherwise drive robots blind into neighbours
+``cone_half_angle_deg``      20.0      a, half-angle of the full-speed cone (capped at β/2);
+                                       at 30° off axis 0.22 m/s remain, at 45° 0.11 m/s
+``blind_speed_mps``          0.05      v_b, speed allowed in every direction under the
+                                       cone: two robots blind to each other close in at
+                                       ≤ ~0.1 m/s (0.15 m/s let such pairs collide)
+``look_gain``                3.0       with the cone: a u* translating outside the
+                                       full-speed cone gets ``ω* = sat(look_gain · φ)``,
+                                       φ its bearing, so the robot turns to see where it
+                                       is sent (1/s; 0 disables)
 ``max_levels``               3         cap on FoV cascade levels: the two nearest
                                        neighbours with a possibly active row get their
                                        own level, the rest share the third (bounds the
@@ -124,6 +159,13 @@ class ControllerParams:
         safety_hard: safety rows are hard constraints (no κ); infeasible → brake.
         safety_speed_margin_mps: δv ≥ 0, the safety row is made robust to an error of
             norm ≤ δv in the neighbour's velocity estimate (m/s), [0, 100].
+        fov_recovery_cap: c in [0, 1]; FoV rows out of view recover by rotation only,
+            demanding at most ``c |A_ω| ω_max`` (0: the paper's rows).
+        motion_cone: add the "look where you go" level below the safety rows.
+        cone_half_angle_deg: half-angle of the full-speed cone, (0, 179] degrees.
+        blind_speed_mps: speed allowed outside the cone (m/s), [0, 100].
+        look_gain: gain (1/s) turning the robot towards u*'s translation when it points
+            outside the cone, [0, 100].
         max_levels: maximum number of FoV cascade levels, in [1, 256]; neighbours
             beyond ``max_levels − 1`` share the last level.
         max_fov_neighbours: neighbours (ranked by d) whose FoV rows may enter the
@@ -155,6 +197,11 @@ class ControllerParams:
     safety_first: bool = True
     safety_hard: bool = False
     safety_speed_margin_mps: float = 0.0
+    fov_recovery_cap: float = 0.8
+    motion_cone: bool = False
+    cone_half_angle_deg: float = 20.0
+    blind_speed_mps: float = 0.05
+    look_gain: float = 3.0
     max_levels: int = 3
     max_fov_neighbours: int = 8
     n_polygon: int = 16
@@ -182,10 +229,20 @@ class ControllerParams:
         _check("alpha_safety_gain", self.alpha_safety_gain, 0.0, 1e6, lo_open=True)
         _check("alpha_range_gain", self.alpha_range_gain, 0.0, 1e6, lo_open=True)
         _check("slack_slope", self.slack_slope, 0.0, 100.0, lo_open=True)
-        for name in ("slack_zero_below_ds", "safety_first", "safety_hard", "prune"):
+        for name in (
+            "slack_zero_below_ds",
+            "safety_first",
+            "safety_hard",
+            "prune",
+            "motion_cone",
+        ):
             _check_bool(name, getattr(self, name))
         _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)
         _check("safety_speed_margin_mps", self.safety_speed_margin_mps, 0.0, 100.0)
+        _check("cone_half_angle_deg", self.cone_half_angle_deg, 0.0, 179.0, lo_open=True)
+        _check("blind_speed_mps", self.blind_speed_mps, 0.0, 100.0)
+        _check("look_gain", self.look_gain, 0.0, 100.0)
+        _check("fov_recovery_cap", self.fov_recovery_cap, 0.0, 1.0)
         _check_int("max_levels", self.max_levels, 1, 256)
         _check_int("max_fov_neighbours", self.max_fov_neighbours, 1, 1024)
         _check_int("n_polygon", self.n_polygon, 4, 256)

@@ -17,6 +17,7 @@ from fov_marl.control.cbf import (
     class_k,
     fov_barrier,
     fov_barrier_lie,
+    motion_cone_rows,
     normalise_rows,
     row_authority,
     row_h_max,
@@ -28,6 +29,8 @@ from fov_marl.geometry import in_fov, integrate_unicycle, rotation, world_to_bod
 
 BETAS = (60.0, 120.0, 200.0, 360.0)
 PRM = ControllerParams()
+#: the rows exactly as in the paper (Eq. 12 at the mean, α uncapped)
+PAPER_ROWS = ControllerParams(fov_recovery_cap=0.0)
 
 
 def _cfg(beta: float = 120.0):
@@ -264,16 +267,113 @@ def test_far_neighbour_fov_rows_are_released(r, phi, vx, vy):
 
 
 def test_near_neighbour_rows_are_the_hard_cbf():
-    """d ≤ D_s: ε = 0 and b = drift + α(h) (Eq. 11 unrelaxed)."""
+    """d ≤ D_s: ε = 0 and b = drift + α(h) (Eq. 11 unrelaxed), with the paper's rows."""
     cfg = _cfg(120.0)
+    prm = PAPER_ROWS
     p = np.array([[3.0, 4.0], [-2.0, 1.0]])
     v = np.array([[0.3, -0.2], [0.0, 1.0]])
-    rows = cbf_rows(p, v, np.array([0.0, 2.0]), cfg, PRM)
+    rows = cbf_rows(p, v, np.array([0.0, 2.0]), cfg, prm)
     A, drift = fov_barrier_lie(p, v, cfg.fov_rad)
-    h = fov_barrier(p, cfg.fov_rad, 2.0, 10.0, PRM.fov_margin_m)
+    h = fov_barrier(p, cfg.fov_rad, 2.0, 10.0, prm.fov_margin_m)
     np.testing.assert_allclose(rows.eps, 0.0)
-    np.testing.assert_allclose(rows.b, drift + class_k(h, PRM))
+    np.testing.assert_allclose(rows.b, drift + class_k(h, prm))
     np.testing.assert_allclose(rows.A, A)
+
+
+def test_fov_rows_in_view_are_the_papers():
+    """Default ``fov_recovery_cap``: rows of a neighbour in view (h + ε ≥ 0) are untouched."""
+    cfg = _cfg(120.0)
+    p = np.array([[3.0, 0.2], [6.0, -2.0], [20.0, 5.0]])
+    v = np.array([[0.3, -0.2], [0.0, 0.5], [-0.5, 0.0]])
+    d = np.array([0.0, 1.0, 15.0])
+    rows, paper = cbf_rows(p, v, d, cfg, PRM), cbf_rows(p, v, d, cfg, PAPER_ROWS)
+    np.testing.assert_array_equal(rows.A, paper.A)
+    np.testing.assert_array_equal(rows.b, paper.b)
+
+
+def test_fov_recovery_turns_the_camera_and_never_drives():
+    """A neighbour out of view (h + ε < 0, ε = 0 at d = 0): its border rows lose their
+    translation terms and demand at most what rotation gives (``−c |A_ω| ω_max``), so
+    turning towards it satisfies them; the paper's rows demand more and credit backing
+    up towards the neighbour. Rows that hold and the safety row are unchanged."""
+    cfg = _cfg(120.0)
+    w_max = cfg.omega_max_radps
+    phi = math.radians(100.0)  # 40° beyond the left border, 8 m away
+    p = np.array([[8.0 * math.cos(phi), 8.0 * math.sin(phi)]])
+    v, d = np.zeros((1, 2)), np.zeros(1)
+    rows, paper = cbf_rows(p, v, d, cfg, PRM), cbf_rows(p, v, d, cfg, PAPER_ROWS)
+    assert paper.h[0, 1] < 0 <= paper.h[0, 0]
+    np.testing.assert_allclose(rows.A[0, 1, 0:2], 0.0)
+    np.testing.assert_allclose(rows.A[0, 1, 2], paper.A[0, 1, 2])
+    cap = -PRM.fov_recovery_cap * abs(paper.A[0, 1, 2]) * w_max
+    np.testing.assert_allclose(rows.b[0, 1], cap)
+    assert paper.b[0, 1] < cap  # the paper's cubic demands more than ω_max can give
+    np.testing.assert_array_equal(rows.A[0, [0, 2]], paper.A[0, [0, 2]])
+    np.testing.assert_array_equal(rows.b[0, [0, 2]], paper.b[0, [0, 2]])
+    turn = np.array([0.0, 0.0, w_max])
+    assert np.all(rows.A[0, 0:2] @ turn + rows.b[0, 0:2] >= 0.0)
+    assert not np.all(paper.A[0, 0:2] @ turn + paper.b[0, 0:2] >= 0.0)
+
+
+def test_fov_recovery_behind_turns_towards_the_neighbours_side():
+    """Back cone (both border rows violated): their ω terms disagree, so the row that
+    would turn the robot away from j's side (sign of y) is voided; turning towards j at
+    ω_max then satisfies both, turning away does not."""
+    cfg = _cfg(120.0)
+    w_max = cfg.omega_max_radps
+    for y in (0.7, -0.7):
+        p = np.array([[-6.0, y]])
+        rows = cbf_rows(p, np.zeros((1, 2)), np.zeros(1), cfg, PRM)
+        paper = cbf_rows(p, np.zeros((1, 2)), np.zeros(1), cfg, PAPER_ROWS)
+        assert np.all(paper.h[0, 0:2] < 0)
+        assert paper.A[0, 0, 2] * paper.A[0, 1, 2] < 0  # the paper's rows conflict in ω
+        np.testing.assert_allclose(rows.A[0, 0:2, 0:2], 0.0)
+        towards = np.array([0.0, 0.0, math.copysign(w_max, y)])
+        assert np.all(rows.A[0, 0:2] @ towards + rows.b[0, 0:2] >= 0.0)
+        assert not np.all(rows.A[0, 0:2] @ -towards + rows.b[0, 0:2] >= 0.0)
+
+
+def test_range_row_beyond_range_is_void_inside_it_is_kept():
+    """The range row of a mean beyond R_d (h + ε < 0) cannot be repaired by turning: it
+    is void (A = 0, b ≥ 0) instead of pulling the robot towards the mean; within R_d it
+    keeps the paper's form (it still stops the robot from backing out of range)."""
+    cfg = _cfg(120.0)
+    p = np.array([[10.4, 0.0], [3.0, 0.5]])
+    v = np.zeros((2, 2))
+    d = np.zeros(2)
+    rows, paper = cbf_rows(p, v, d, cfg, PRM), cbf_rows(p, v, d, cfg, PAPER_ROWS)
+    assert paper.h[0, 3] < 0 and paper.b[0, 3] < 0  # the paper: drive towards the mean
+    np.testing.assert_allclose(rows.A[0, 3], 0.0)
+    assert rows.b[0, 3] == np.inf and rows.h[0, 3] == np.inf  # void: pruned
+    np.testing.assert_array_equal(rows.A[1, 3], paper.A[1, 3])
+    np.testing.assert_array_equal(rows.b[1, 3], paper.b[1, 3])
+
+
+def test_motion_cone_rows_shape_the_admissible_speeds():
+    """Full speed within ±a of the camera axis, ~v_b beyond the tangent points
+    ``ψ = a + acos(v_b / v_max)``, monotone in between (the hull's straight sides);
+    u = 0 admissible; a capped at β/2; no rows for an isotropic camera."""
+    vb, vmax = 0.05, 1.0
+
+    def top_speed(G, h, ang):
+        e = np.array([math.cos(ang), math.sin(ang), 0.0])
+        r = G @ e
+        return min([hh / rr for rr, hh in zip(r, h, strict=True) if rr < 0] + [np.inf])
+
+    for fov, half in ((120.0, 20.0), (120.0, 80.0), (240.0, 20.0), (40.0, 60.0)):
+        G, h = motion_cone_rows(math.radians(fov), vb, vmax, math.radians(half))
+        a = min(fov / 2, half)
+        assert G.shape == (5, 3) and np.all(G[:, 2] == 0) and np.all(h <= 0)
+        assert np.all(G @ np.zeros(3) >= h)
+        for sgn in (1.0, -1.0):
+            assert top_speed(G, h, sgn * math.radians(a)) >= vmax - 1e-9
+            psi = a + math.degrees(math.acos(vb / vmax))
+            speeds = [top_speed(G, h, sgn * math.radians(x)) for x in np.linspace(a, psi, 40)]
+            assert np.all(np.diff(speeds) <= 1e-9)
+            for x in np.linspace(psi, 180.0, 10):
+                assert top_speed(G, h, sgn * math.radians(x)) <= vb / math.cos(math.pi / 8) + 1e-9
+    G, h = motion_cone_rows(2 * math.pi, vb, vmax, math.radians(20.0))
+    assert G.shape == (0, 3) and h.shape == (0,)
 
 
 def test_safety_speed_margin_tightens_only_the_safety_row():
