@@ -100,15 +100,18 @@ turn (one of them first decreases along the shortest turn), so the level is
 infeasible and the cascade (Eq. 18) spends all inputs, translation included, on
 reducing its violation. Measured with the paper's rows: four crossing robots under
 Eq. 22 dragged 8-18 m off their targets for minutes by neighbours' means behind them
-or just beyond R_d (one of seeds 0-4 arrived within 200 s); a coverage robot backed
-blind into a neighbour while "looking" for another one's mean behind it.
+or just beyond R_d (seeds 1 and 2 never all arrived within 200 s, 0, 3 and 4 took
+46-163 s); a coverage robot backed blind into a neighbour while "looking" for another
+one's mean behind it.
 
 Searching (Section VI-B) is what the camera does, so with ``c = fov_recovery_cap > 0``
 a FoV row in *recovery* (``h_r + ε_r < 0``: the neighbour's mean outside the sector
-shrunk by ε, or beyond R_d) keeps only its rotation term and demands at most what
-rotation delivers::
+shrunk by ε, or beyond R_d) keeps only its rotation term, demands at most what
+rotation delivers, and adds the harm the desired translation v* (u*'s) would do, so
+the robot turns harder when its own motion pushes j further out of view, but never
+gets a translation credited::
 
-    A_r ← [0, 0, A_r,ω],   b_r ← max(b_r, −c |A_r,ω| ω_max)          (r = 0, 1, 3)
+    A_r ← [0, 0, A_r,ω],   b_r ← max(b_r, −c |A_r,ω| ω_max) + min(0, A_r,v · v*)   (r = 0, 1, 3)
 
 In the back cone (both border rows in recovery, ω terms of opposite signs) the row
 whose ω term opposes ``sign(ⁱy_j)`` is dropped, so both agree on turning towards the
@@ -117,8 +120,9 @@ never chases a mean beyond R_d; rows are void by marking them inactive, h = b = 
 Rows that hold (``h + ε ≥ 0``, j in view) are exactly Eq. 17's and keep j in view
 (forward invariance) against every input, translation included; the safety row is
 never changed. V = −h still decreases (Eq. 14-15) whenever the robot turns towards j
-at ≥ c ω_max. With these rows all of crossing seeds 0-9 arrive in 33-59 s and 20
-coverage seeds keep ≥ 2.2 m.
+fast enough (≥ c ω_max plus what its translation takes away). With these rows all of
+crossing seeds 0-9 arrive in 35-57 s (6 robots, seeds 0-2: 40-86 s) and 20 coverage
+seeds (β = 120°) keep ≥ 2.27 m.
 
 Motion cone ("look where you go", ``ControllerParams.motion_cone``)
 ===================================================================
@@ -389,11 +393,13 @@ def cbf_rows(
     config: ScenarioConfig,
     params: ControllerParams,
     h_max: np.ndarray | None = None,
+    v_desired_body: np.ndarray | None = None,
 ) -> CbfRows:
     """Assemble the rows of Eq. 17 in our reading: ``A u + drift + α(h + ε) ≥ 0``.
 
     FoV rows in recovery (``h + ε < 0``) are then reduced to their rotation term
-    (``params.fov_recovery_cap``, module docstring; 0 keeps the paper's rows).
+    (``params.fov_recovery_cap``, module docstring; 0 keeps the paper's rows), which
+    also compensates the harm the desired translation ``v_desired_body`` would do.
 
     h comes from :func:`fov_barrier` with ``params.fov_margin_m`` (the FoV rows keep
     the neighbour that far inside the sector, absorbing the discrete-time overshoot
@@ -407,6 +413,8 @@ def cbf_rows(
     Args:
         p_body: ``(M, 2)`` ⁱp_j (m). v_est_body: ``(M, 2)`` ⁱv_j^est (m/s).
         d: ``(M,)`` ellipse distances d_ij (m).
+        v_desired_body: ``(2,)`` the robot's desired planar velocity (u*'s), m/s; None
+            is zero.
 
     Returns:
         :class:`CbfRows`.
@@ -422,7 +430,9 @@ def cbf_rows(
     eps = slack(d, config, params, h_max)
     b = drift + class_k(h + eps, params)
     if params.fov_recovery_cap > 0.0:
-        A, b, h = _recover_by_rotation(A, b, h, eps, p_body, config, params.fov_recovery_cap)
+        A, b, h = _recover_by_rotation(
+            A, b, h, eps, p_body, config, params.fov_recovery_cap, v_desired_body
+        )
     if params.safety_speed_margin_mps > 0.0:
         p = np.asarray(p_body, dtype=np.float64)
         b[:, SAFETY_ROW] -= 2.0 * params.safety_speed_margin_mps * np.hypot(p[:, 0], p[:, 1])
@@ -437,11 +447,14 @@ def _recover_by_rotation(
     p_body: np.ndarray,
     config: ScenarioConfig,
     cap: float,
+    v_desired: np.ndarray | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """FoV rows in recovery turn the camera and never drive the robot (see :func:`cbf_rows`).
 
     Rows 0, 1, 3 with ``h + ε < 0`` lose their translational coefficients and demand at
-    most ``cap · |A_ω| ω_max``, what rotation delivers. In the back cone, where both
+    most ``cap · |A_ω| ω_max``, what rotation delivers, plus the harm the desired
+    translation does, ``−min(0, A_v · v*)`` (so the robot turns harder to see a
+    neighbour its own motion pushes out of view). In the back cone, where both
     border rows are in recovery, the one whose ω coefficient opposes ``sign(y)`` (the
     way to turn towards j) loses its ω coefficient too. A row left without coefficients
     (the range row in recovery, that border row) is void: marked inactive like the
@@ -450,29 +463,27 @@ def _recover_by_rotation(
     Returns:
         ``(A, b, h)``, new arrays.
     """
-    A = A.copy()
-    b = b.copy()
-    h = h.copy()
-    fov = [0, 1, 3]
-    rec = np.isfinite(h[:, fov]) & (h[:, fov] + eps[:, fov] < 0.0)
+    with np.errstate(invalid="ignore"):
+        rec = h + eps < 0.0  # inactive rows are +inf: never in recovery
+    rec[:, SAFETY_ROW] = False
     if not rec.any():
         return A, b, h
-    Af = A[:, fov, :]
-    Af[..., 0:2] = np.where(rec[..., None], 0.0, Af[..., 0:2])
+    A = A.copy()
+    h = h.copy()
+    if v_desired is None:
+        harm = 0.0
+    else:
+        vd = np.asarray(v_desired, dtype=np.float64).reshape(2)
+        harm = np.minimum(0.0, A[..., 0] * vd[0] + A[..., 1] * vd[1])
+    A[rec, 0:2] = 0.0
     y = np.asarray(p_body, dtype=np.float64)[:, 1]
-    both = rec[:, 0] & rec[:, 1]
-    for k in (0, 1):
-        wrong = both & (Af[:, k, 2] * y < 0.0)
-        Af[wrong, k, 2] = 0.0
-    floor = -cap * np.abs(Af[..., 2]) * config.omega_max_radps
-    bf = np.where(rec, np.maximum(b[:, fov], floor), b[:, fov])
-    void = rec & (Af[..., 2] == 0.0)
-    bf[void] = np.inf
-    hf = h[:, fov]
-    hf[void] = np.inf
-    A[:, fov, :] = Af
-    b[:, fov] = bf
-    h[:, fov] = hf
+    w_border = A[:, 0:2, 2]  # a view
+    w_border[(rec[:, 0] & rec[:, 1])[:, None] & (w_border * y[:, None] < 0.0)] = 0.0
+    w = A[..., 2]
+    b = np.where(rec, np.maximum(b, -cap * np.abs(w) * config.omega_max_radps) + harm, b)
+    void = rec & (w == 0.0)
+    b[void] = np.inf
+    h[void] = np.inf
     return A, b, h
 
 

@@ -49,7 +49,7 @@ Pipeline of :meth:`FovCbfController.solve`
 The cost per robot is bounded independently of N: row assembly is vectorised over
 neighbours (a few µs per op whatever M), and at most ``2 (max_levels + 1)`` small QPs
 are solved (1-2 per level that the previous candidate violates, none when u*
-already satisfies every row; 0.9-2.5 per step on average in
+already satisfies every row; 0.7-3.2 per step on average in
 :func:`~fov_marl.control.benchmark.bench_control` for N = 6-48).
 
 Fallbacks never raise: non-finite inputs → ``u = 0`` (``"invalid_input"``); a hard
@@ -315,7 +315,7 @@ class FovCbfController:
         n_cone = self._cone_b.shape[0] if M else 0  # alone, there is no one to run into
         if n_cone and p.look_gain > 0.0:
             u_star = self.look_where_you_go(u_star)
-        rows = cbf_rows(p_body, v_est_body, d, cfg, p, self.h_max)
+        rows = cbf_rows(p_body, v_est_body, d, cfg, p, self.h_max, u_star[:2])
         At, bt, _ = normalise_rows(rows.A, rows.b, cfg.v_max_mps, cfg.omega_max_radps, p.row_clip)
         active = bt < 1.0 if p.prune else np.isfinite(rows.h)
         u_proj = self.qp.project(u_star)

@@ -51,16 +51,18 @@ field                        default   source / reason
                                        neighbour out of view or its mean beyond R_d) is
                                        *recovered by turning the camera*: its translation
                                        terms are dropped and it demands at most
-                                       ``c |A_ω| ω_max`` (the range row, which rotation
-                                       cannot repair, is void); see
-                                       :func:`~fov_marl.control.cbf.cbf_rows`. 0: the paper
-                                       (Theorem 1's recovery with every input). Measured:
-                                       the paper's rows dragged crossing robots up to 15 m
-                                       off their targets (4 robots, Eq. 22: 1 of seeds 0-4
-                                       arrived within 200 s; with c = 0.8 all of seeds 0-9
-                                       in 33-59 s) and backed a coverage robot blind into a
-                                       neighbour (seed 18, 0.94 m; 20 seeds now ≥ 2.2 m).
-                                       c < 1 leaves ``(1 − c)`` of the turn rate to spare
+                                       ``c |A_ω| ω_max`` plus what u*'s translation takes
+                                       away (the range row, which rotation cannot repair,
+                                       is void); see :mod:`~fov_marl.control.cbf`. 0: the
+                                       paper (Theorem 1's recovery with every input).
+                                       Measured: the paper's rows dragged crossing robots
+                                       8-18 m off their targets (4 robots, Eq. 22: seeds
+                                       1, 2 never all arrived, 0, 3, 4 in 46-163 s; with
+                                       c = 0.8 all of seeds 0-9 in 35-57 s) and, with the
+                                       other changes here, backed a coverage robot blind
+                                       into a neighbour (seed 18, 0.94 m; 20 seeds now
+                                       ≥ 2.27 m). c < 1 leaves ``(1 − c)`` of the turn
+                                       rate to spare
 ``motion_cone``              False     "look where you go" (not in the paper): a level right
                                        below the safety rows keeps planar speed ≤
                                        ``blind_speed_mps`` outside ±``cone_half_angle_deg``

@@ -75,13 +75,16 @@ def test_pfcbf_coverage_reaches_eta_099_without_collisions(fov, seed):
     assert rec.min_distance > 1.0  # above D_s / 2 = two robot radii
 
 
-@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("seed", range(5))
 def test_pfcbf_crossing_all_reach_targets_without_collision(seed):
-    """Paper VII-D: 4 robots on intersecting paths, Eq. 22 motion model."""
+    """Paper VII-D: 4 robots on intersecting paths, Eq. 22 motion model. The straight
+    path is ~24 m at 1 m/s; detours and searching may cost time, not minutes."""
     rec = run_episode("crossing", "pfcbf", seed, n_agents=4)
     assert rec.arrived == 4, rec
     assert rec.collisions == 0, rec
     assert rec.time_to_arrival_s is not None
+    assert rec.time_to_arrival_s < 100.0, rec
+    assert rec.min_distance > 1.5, rec  # well clear of contact (1 m)
 
 
 def test_policy_draws_particles_and_ellipses_into_the_frame():

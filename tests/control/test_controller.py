@@ -259,3 +259,84 @@ def test_safety_distance_is_kept_driving_at_a_neighbour():
         )
         dmin = min(math.hypot(*p) for p, _, _ in log)
         assert dmin >= CFG.safety_distance_m - 0.05
+
+
+def test_ties_in_d_go_to_the_nearest_mean_first():
+    """Several far-reaching ellipses give d = 0: the nearest mean gets the first FoV level."""
+    ctrl = FovCbfController(CFG, ControllerParams(prune=False, max_levels=8))
+    active = np.ones((3, 4), dtype=bool)
+    lev = ctrl.assign_levels(active, np.zeros(3), np.arange(3), np.array([6.0, 2.0, 9.0]))
+    np.testing.assert_array_equal(lev[:, 0], [2, 1, 3])
+
+
+def test_neighbour_behind_is_searched_by_turning_not_by_backing_up():
+    """A hard neighbour behind (d = 0) while u* drives ahead: the default rows turn the robot
+    until it sees j and never pull it back; the paper's rows back it up blind, never see j."""
+    scripted = (lambda *_: np.array([1.0, 0.0, 0.0]), (10, 20, 0), (4, 20.5, 0), (0, 0), 12.0, 50)
+    log = _run_pair(*scripted)
+    assert _seen(log)[:25].any() and _seen(log)[-10:].all()
+    assert all(r.u[0] > 0.5 for _, _, r in log[:15])  # keeps driving while it turns
+    paper = _run_pair(*scripted, params=ControllerParams(fov_recovery_cap=0.0))
+    assert not _seen(paper).any()
+    assert min(r.u[0] for _, _, r in paper) < -0.5
+
+
+def _cone_speed_limit(params, cfg=CFG):
+    from fov_marl.control.cbf import motion_cone_rows
+
+    G, h = motion_cone_rows(
+        cfg.fov_rad, params.blind_speed_mps, cfg.v_max_mps, math.radians(params.cone_half_angle_deg)
+    )
+
+    def limit(v):
+        return bool(np.all(G[:, :2] @ v >= h - 1e-9))
+
+    return limit
+
+
+def test_motion_cone_turns_to_look_then_goes():
+    """u* away from a neighbour 5 m ahead (world −x, ω* = 0): with the cone the robot first
+    turns (look gain) at ≤ v_b and only then moves fast; without it, it backs off blind."""
+    prm = ControllerParams(motion_cone=True)
+    inside = _cone_speed_limit(prm)
+
+    def away(pose, _):
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        return np.array([-c, s, 0.0])  # R(θ)ᵀ (−1, 0)
+
+    log = _run_pair(away, (20, 20, 0), (25, 20, 0), (0, 0), 0.5, 40, prm)
+    assert all(inside(r.u[:2]) for _, _, r in log)
+    assert math.hypot(*log[0][2].u[:2]) <= prm.blind_speed_mps / math.cos(math.pi / 8) + 1e-9
+    assert log[0][2].u[2] == pytest.approx(CFG.omega_max_radps)  # look: turn at full rate
+    assert max(math.hypot(*r.u[:2]) for _, _, r in log[-10:]) > 0.9  # then it goes
+    free = _run_pair(
+        lambda *_: np.array([-1.0, 0.0, 0.0]), (20, 20, 0), (25, 20, 0), (0, 0), 0.5, 3
+    )
+    assert free[0][2].u[0] < -0.9
+
+
+def test_motion_cone_yields_to_the_safety_rows():
+    """A neighbour in view closing in at 0.8 m/s (its estimated velocity): the cone level
+    ranks below safety, so the robot backs off blind faster than v_b and keeps D_s."""
+    prm = ControllerParams(motion_cone=True)
+    log = _run_pair(lambda *_: np.zeros(3), (20, 20, 0), (23, 20, 0), (-0.8, 0), 0.5, 40, prm)
+    dmin = min(math.hypot(*p) for p, _, _ in log)
+    assert dmin >= CFG.safety_distance_m - 0.1
+    assert max(r.cone_violation for _, _, r in log) > 0.0
+    assert min(r.u[0] for _, _, r in log) < -0.5
+
+
+def test_motion_cone_levels_and_reporting():
+    """The cone is level 1 (FoV levels shift below it); no cone without neighbours or at 360°."""
+    prm = ControllerParams(motion_cone=True, prune=False)
+    ctrl = FovCbfController(CFG, prm)
+    res = ctrl.solve(
+        np.array([0.0, 1.0, 0.0]), np.array([[4.0, 0.5]]), np.zeros((1, 2)), np.zeros(1)
+    )
+    assert res.level[0, 2] == 0 and np.all(res.level[0, [0, 1, 3]] >= 2)
+    assert res.intervened and res.u[1] < 0.5 and res.u[2] > 0  # sideways: cut, turns to look
+    iso = FovCbfController(make_config(fov_deg=360.0), prm)
+    res = iso.solve(
+        np.array([0.0, 1.0, 0.0]), np.array([[4.0, 0.5]]), np.zeros((1, 2)), np.zeros(1)
+    )
+    assert res.u[1] > 0.9 and res.cone_violation == 0.0

@@ -3,13 +3,17 @@ random and adversarial policies."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from pettingzoo.test import parallel_api_test
 
+from fov_marl.control import ControllerParams
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
 from fov_marl.evaluation import run_episode
 from fov_marl.wrappers import SafetyFilterWrapper
+from fov_marl.wrappers.safety_filter import FILTER_CONTROLLER_DEFAULTS
 
 
 def test_wrapper_passes_parallel_api_test_and_keeps_spaces():
@@ -111,6 +115,58 @@ def test_unfiltered_adversary_does_collide():
 @pytest.mark.parametrize("factory", [_random, adversarial_factory], ids=["random", "adversarial"])
 def test_no_collisions_20_episodes(n, factory):
     _check_no_collisions(factory, n, range(20), 1000)
+
+
+def test_filter_controller_defaults_and_overrides():
+    """The filter adds the motion cone and a 0.5 m/s safety margin to ControllerParams();
+    dict overrides keep the other filter defaults, a dataclass is used as given."""
+    base = fov_coverage_v0.parallel_env(n_agents=3)
+    prm = SafetyFilterWrapper(base).pipeline.controller_params
+    assert prm == ControllerParams(**FILTER_CONTROLLER_DEFAULTS)
+    assert prm.motion_cone and prm.safety_speed_margin_mps == 0.5
+    over = SafetyFilterWrapper(base, controller_params={"blind_speed_mps": 0.1})
+    assert over.pipeline.controller_params.motion_cone
+    assert over.pipeline.controller_params.blind_speed_mps == 0.1
+    given = SafetyFilterWrapper(base, controller_params=ControllerParams())
+    assert not given.pipeline.controller_params.motion_cone
+
+
+def test_filter_moves_robots_fast_only_where_they_look():
+    """A policy backing every robot at full speed: behind the filter a robot goes faster
+    than v_b outside the ±20° cone only when a safety row needs it (cone_violation)."""
+    n = 6
+
+    def backwards(env):
+        class Back:
+            def reset(self, seed=None):
+                pass
+
+            def act(self, obs):
+                return {a: np.array([-1.0, 0.0, 0.0], np.float32) for a in obs}
+
+        return Back()
+
+    env = SafetyFilterWrapper(fov_coverage_v0.parallel_env(n_agents=n))
+    pol = backwards(env)
+    obs, _ = env.reset(seed=3)
+    prm = env.pipeline.controller_params
+    cfg = env.config
+    fast_blind = legit = 0
+    for _ in range(60):
+        obs, _, _, _, infos = env.step(pol.act(obs))
+        for i, a in enumerate(env.possible_agents):
+            act = infos[a]["safety"]["applied_action"]
+            v = act[:2] * cfg.v_max_mps
+            ang = math.degrees(math.atan2(v[1], v[0]))
+            if abs(ang) > prm.cone_half_angle_deg + 10 and np.hypot(*v) > 2 * prm.blind_speed_mps:
+                fast_blind += 1
+                legit += env.pipeline.last_results[i].cone_violation > 0
+    assert legit == fast_blind
+    unfiltered = run_episode(
+        "coverage", backwards, 3, n_agents=n, max_steps=5, record_trajectory=True
+    )
+    step = np.linalg.norm(np.diff(np.array(unfiltered.trajectory)[:, :, :2], axis=0), axis=-1)
+    assert step.max() > 0.9 * cfg.v_max_mps * cfg.dt_s  # the policy itself backs off at full speed
 
 
 def test_filter_on_crossing_env():
