@@ -550,7 +550,7 @@ def motion_cone_rows(
     corners ``v_max (cos a, ±sin a)``; the other three close the hull behind the
     robot (the ``±ψ`` sides alone would meet ``v_b / |cos ψ|`` behind it). With
     v_b = 0.05 m/s and a = 20° the speed allowed at 30° off the axis is 0.22 m/s, at
-    45° 0.11 m/s and beyond 90° v_b. Rows are returned as ``G u ≥ h`` with ``G = −n``,
+    45° 0.11 m/s and beyond 90° about v_b. Rows are returned as ``G u ≥ h`` with ``G = −n``,
     ``h = −v_b``: ``u = 0`` always satisfies them (braking stays admissible).
 
     Args:

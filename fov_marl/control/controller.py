@@ -353,7 +353,7 @@ class FovCbfController:
         qres = self.qp.solve(A_q, b_q, l_q, u_star)
         kappa[jj, rr] = qres.kappa[: jj.size]
         u = qres.u
-        du = u - u_proj
+        du = u - (u_proj if u_star is u_given else self.qp.project(u_given))
         intervened = bool(math.sqrt(float(du @ du)) > p.intervention_tol)
         st["qp_solves"] += qres.n_qp
         st["fallbacks"] += int(qres.fallback)

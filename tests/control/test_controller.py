@@ -308,6 +308,7 @@ def test_motion_cone_turns_to_look_then_goes():
     assert all(inside(r.u[:2]) for _, _, r in log)
     assert math.hypot(*log[0][2].u[:2]) <= prm.blind_speed_mps / math.cos(math.pi / 8) + 1e-9
     assert log[0][2].u[2] == pytest.approx(CFG.omega_max_radps)  # look: turn at full rate
+    assert log[0][2].intervened and log[0][2].u_star[2] == 0.0  # ω* as given, changed
     assert max(math.hypot(*r.u[:2]) for _, _, r in log[-10:]) > 0.9  # then it goes
     free = _run_pair(
         lambda *_: np.array([-1.0, 0.0, 0.0]), (20, 20, 0), (25, 20, 0), (0, 0), 0.5, 3
