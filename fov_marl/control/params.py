@@ -113,35 +113,21 @@ field                        default   source / reason
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from fov_marl.config import ConfigError
+from fov_marl.validation import check_bool, check_int, check_real
 
 __all__ = ["ControllerParams"]
 
 
 def _check(name: str, value: Any, lo: float, hi: float, *, lo_open: bool = False) -> None:
-    allowed = f"{'(' if lo_open else '['}{lo}, {hi}]"
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a real number in {allowed}, got {value!r}") from None
-    if isinstance(value, bool) or not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
-        raise ConfigError(f"{name} must be in {allowed}, got {value!r}")
+    check_real(name, value, lo, hi, lo_open=lo_open)
 
 
-def _check_int(name: str, value: Any, lo: int, hi: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not lo <= value <= hi:
-        raise ConfigError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}")
-
-
-def _check_bool(name: str, value: Any) -> None:
-    if not isinstance(value, bool | np.bool_):
-        raise ConfigError(f"{name} must be a bool, got {value!r}")
+_check_int = check_int
+_check_bool = check_bool
 
 
 @dataclass(frozen=True)
