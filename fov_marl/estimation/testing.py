@@ -16,6 +16,24 @@ Scripted motions for the robots (normalised actions), to test the filter against
 * :class:`RandomMotion`: a bounded, smoothly varying random velocity (Ornstein-Uhlenbeck);
 * :class:`RingMotion`: coverage-like: each robot heads to its own point on a ring around
   q_m, facing its direction of travel, and stops there (where Eq. 20 is wrong).
+* :class:`UniformRandomMotion`: independent uniform actions in ``[-1, 1]^3`` every step
+  (the ``random`` baseline policy).
+
+Adversarial motions (scripted from the true poses; they stress the tracker, they are
+not a public API: :mod:`fov_marl.adversaries` is):
+
+* :class:`StraightMotion`: straight ahead at full speed, action ``[1, 0, 0]``; robots
+  reach a wall, slide along it into a corner and push there;
+* :class:`ChargeCentreMotion`: full speed towards the team's centroid, facing the
+  direction of travel (with ``spin=True``: at ``ω_max`` all the time, the body
+  velocity re-aimed each step so the world direction still points at the centre);
+* :class:`ChaseMotion`: full speed towards robot ``(i + 1) mod N`` (cyclic pursuit),
+  facing it;
+* :class:`WaitChargeMotion`: still (turning slowly) for a per-robot time drawn from
+  ``U[wait_min_s, wait_max_s]``, then :class:`ChargeCentreMotion`.
+
+All the adversaries keep commanding full speed where they are (a robot at the centroid
+chatters across it at v_max).
 """
 
 from __future__ import annotations
@@ -35,8 +53,15 @@ __all__ = [
     "ModelMotion",
     "RandomMotion",
     "RingMotion",
+    "UniformRandomMotion",
+    "StraightMotion",
+    "ChargeCentreMotion",
+    "ChaseMotion",
+    "WaitChargeMotion",
     "random_poses",
     "calibration_rates",
+    "calibration_counter",
+    "CalibrationCounter",
 ]
 
 
@@ -233,6 +258,190 @@ class RingMotion:
         return _to_action(c, poses, v, _face(poses, v))
 
 
+class UniformRandomMotion:
+    """Independent uniform actions in ``[-1, 1]^3`` for every robot and step (the
+    ``random`` baseline): a slow, jittery diffusion (~0.25 m/sqrt(s) per axis)."""
+
+    def __init__(self, config: ScenarioConfig, rng: np.random.Generator) -> None:
+        self.rng = rng
+
+    def __call__(self, poses: np.ndarray) -> np.ndarray:
+        return self.rng.uniform(-1.0, 1.0, (len(poses), 3)).astype(np.float32)
+
+
+def _full_speed_towards(config: ScenarioConfig, poses: np.ndarray, target_world: np.ndarray):
+    """``(N, 2)`` world velocity of norm v_max from each robot towards its target."""
+    e = target_world - poses[:, :2]
+    r = np.linalg.norm(e, axis=1, keepdims=True)
+    return config.v_max_mps * e / np.maximum(r, 1e-9)
+
+
+class StraightMotion:
+    """Straight ahead at full speed: action ``[1, 0, 0]`` for every robot, always."""
+
+    def __init__(self, config: ScenarioConfig, rng: np.random.Generator) -> None:
+        pass
+
+    def __call__(self, poses: np.ndarray) -> np.ndarray:
+        a = np.zeros((len(poses), 3), dtype=np.float32)
+        a[:, 0] = 1.0
+        return a
+
+
+class ChargeCentreMotion:
+    """Full speed towards the team centroid (mean of all positions).
+
+    ``spin=False``: turns to face the direction of travel. ``spin=True``: yaw rate
+    ``+ω_max`` always; the body velocity is the world direction to the centre rotated
+    into Σ_i at the start of the step (so it drifts by ``ω_max dt`` during the step).
+    """
+
+    def __init__(
+        self, config: ScenarioConfig, rng: np.random.Generator, spin: bool = False
+    ) -> None:
+        self.c, self.spin = config, spin
+
+    def __call__(self, poses: np.ndarray) -> np.ndarray:
+        c = self.c
+        v = _full_speed_towards(c, poses, poses[:, :2].mean(axis=0, keepdims=True))
+        om = np.full(len(poses), c.omega_max_radps) if self.spin else _face(poses, v)
+        return _to_action(c, poses, v, om)
+
+
+class ChaseMotion:
+    """Cyclic pursuit: robot i drives at full speed towards robot ``(i + 1) mod N``,
+    facing it."""
+
+    def __init__(self, config: ScenarioConfig, rng: np.random.Generator) -> None:
+        self.c = config
+
+    def __call__(self, poses: np.ndarray) -> np.ndarray:
+        target = np.roll(poses[:, :2], -1, axis=0)
+        v = _full_speed_towards(self.c, poses, target)
+        return _to_action(self.c, poses, v, _face(poses, v))
+
+
+class WaitChargeMotion:
+    """Still for ``U[wait_min_s, wait_max_s]`` per robot (turning at ``0.2 ω_max``, so the
+    camera sweeps), then :class:`ChargeCentreMotion` (facing the direction of travel)."""
+
+    def __init__(
+        self,
+        config: ScenarioConfig,
+        rng: np.random.Generator,
+        wait_min_s: float = 5.0,
+        wait_max_s: float = 40.0,
+    ) -> None:
+        self.c = config
+        self.wait_steps = np.rint(
+            rng.uniform(wait_min_s, wait_max_s, config.n_agents) / config.dt_s
+        ).astype(np.int64)
+        self.charge = ChargeCentreMotion(config, rng)
+        self.t = 0
+
+    def __call__(self, poses: np.ndarray) -> np.ndarray:
+        a = self.charge(poses)
+        waiting = self.t < self.wait_steps
+        a[waiting] = 0.0
+        a[waiting, 2] = 0.2
+        self.t += 1
+        return a
+
+
+class CalibrationCounter:
+    """Accumulates, per category, how often the truth lies inside its confidence ellipse
+    and the mean semi-major axis of the ellipses (an ellipse covering the arena is
+    "calibrated" and useless, so both are reported).
+
+    Categories of a (robot, neighbour) pair at a step: ``detected`` this step; ``recent``:
+    undetected for less than ``long_s``; ``long``: undetected for at least ``long_s``.
+    """
+
+    KEYS = ("detected", "recent", "long")
+
+    def __init__(self, long_s: float = 5.0) -> None:
+        self.long_s = long_s
+        self.hits = dict.fromkeys(self.KEYS, 0)
+        self.n = dict.fromkeys(self.KEYS, 0)
+        self.sum_a = dict.fromkeys(self.KEYS, 0.0)
+
+    def add(self, est: Any, truth_body: np.ndarray) -> None:
+        """Count one step: ``est`` a :class:`~fov_marl.estimation.BankEstimate` (or
+        :class:`~fov_marl.estimation.TrackerEstimate`), ``truth_body`` the true
+        neighbour positions in Σ_i shaped like ``est.mean_body``."""
+        from fov_marl.geometry import ellipse_distance
+
+        d = ellipse_distance(
+            np.asarray(truth_body, dtype=np.float64),
+            est.mean_body,
+            est.ellipse_a,
+            est.ellipse_b,
+            est.ellipse_psi,
+        )
+        inside = d == 0
+        long_ = ~est.detected & (est.time_since_seen_s >= self.long_s - 1e-9)
+        recent = ~est.detected & ~long_
+        for key, sel in (("detected", est.detected), ("recent", recent), ("long", long_)):
+            self.hits[key] += int(np.sum(inside[sel]))
+            self.n[key] += int(np.sum(sel))
+            self.sum_a[key] += float(np.sum(est.ellipse_a[sel]))
+
+    def merge(self, other: CalibrationCounter) -> CalibrationCounter:
+        """Add ``other``'s counts into this one (pooling episodes); returns self."""
+        for k in self.KEYS:
+            self.hits[k] += other.hits[k]
+            self.n[k] += other.n[k]
+            self.sum_a[k] += other.sum_a[k]
+        return self
+
+    def stats(self) -> dict[str, dict[str, float]]:
+        """``{category: {"rate", "n", "mean_a_m"}}`` for the three categories and ``all``
+        (rate NaN where a category is empty)."""
+        out = {}
+        for k in self.KEYS:
+            n = self.n[k]
+            out[k] = dict(
+                rate=self.hits[k] / n if n else float("nan"),
+                n=n,
+                mean_a_m=self.sum_a[k] / n if n else float("nan"),
+            )
+        n = sum(self.n.values())
+        out["all"] = dict(
+            rate=sum(self.hits.values()) / n if n else float("nan"),
+            n=n,
+            mean_a_m=sum(self.sum_a.values()) / n if n else float("nan"),
+        )
+        return out
+
+
+def calibration_counter(
+    config: ScenarioConfig,
+    motion: type | Callable[..., Callable[[np.ndarray], np.ndarray]],
+    params: Any = None,
+    steps: int = 500,
+    seed: int = 0,
+    long_s: float = 5.0,
+    known_start: bool = True,
+) -> CalibrationCounter:
+    """One :class:`MiniWorld` episode with every robot driven by ``motion(config, rng)``
+    and a :class:`~fov_marl.estimation.TrackerBank` of all robots, counted by a
+    :class:`CalibrationCounter` at every step (after the step's update)."""
+    from fov_marl.estimation import TrackerBank
+
+    world = MiniWorld(config, np.random.default_rng(seed))
+    pol = motion(config, np.random.default_rng(seed + 7919))
+    bank = TrackerBank(config, params, seed=seed)
+    bank.reset(world.observe(), initial_poses_world=world.poses if known_start else None)
+    counter = CalibrationCounter(long_s)
+    n = config.n_agents
+    for _ in range(steps):
+        a = pol(world.poses)
+        obs = world.step(a)
+        bank.step(a, obs)
+        counter.add(bank.estimate(), np.stack([world.true_relative(i) for i in range(n)]))
+    return counter
+
+
 def calibration_rates(
     config: ScenarioConfig,
     motion: type | Callable[..., Callable[[np.ndarray], np.ndarray]],
@@ -247,35 +456,13 @@ def calibration_rates(
     Runs a :class:`MiniWorld` episode with every robot driven by ``motion(config, rng)``
     and a :class:`~fov_marl.estimation.TrackerBank` of all robots; each step, for every
     (robot, neighbour) pair, checks whether the true relative position is inside the
-    reported ellipse (:func:`fov_marl.geometry.ellipse_distance` == 0).
+    reported ellipse (:func:`fov_marl.geometry.ellipse_distance` == 0). See
+    :func:`calibration_counter` for the mean ellipse sizes too.
 
     Returns:
         ``{"detected": (rate, n), "recent": (rate, n), "long": (rate, n), "all": ...}``:
         neighbours detected this step; undetected for less than ``long_s``; undetected for
         at least ``long_s`` seconds.
     """
-    from fov_marl.estimation import TrackerBank
-    from fov_marl.geometry import ellipse_distance
-
-    world = MiniWorld(config, np.random.default_rng(seed))
-    pol = motion(config, np.random.default_rng(seed + 7919))
-    bank = TrackerBank(config, params, seed=seed)
-    bank.reset(world.observe(), initial_poses_world=world.poses if known_start else None)
-    hits = {"detected": [0, 0], "recent": [0, 0], "long": [0, 0]}
-    n = config.n_agents
-    for _ in range(steps):
-        a = pol(world.poses)
-        obs = world.step(a)
-        bank.step(a, obs)
-        e = bank.estimate()
-        truth = np.stack([world.true_relative(i) for i in range(n)])
-        inside = ellipse_distance(truth, e.mean_body, e.ellipse_a, e.ellipse_b, e.ellipse_psi) == 0
-        long_ = ~e.detected & (e.time_since_seen_s >= long_s - 1e-9)
-        recent = ~e.detected & ~long_
-        for key, sel in (("detected", e.detected), ("recent", recent), ("long", long_)):
-            hits[key][0] += int(np.sum(inside[sel]))
-            hits[key][1] += int(np.sum(sel))
-    out = {k: (v[0] / v[1] if v[1] else float("nan"), v[1]) for k, v in hits.items()}
-    tot = sum(v[0] for v in hits.values()), sum(v[1] for v in hits.values())
-    out["all"] = (tot[0] / tot[1], tot[1])
-    return out
+    st = calibration_counter(config, motion, params, steps, seed, long_s, known_start).stats()
+    return {k: (v["rate"], v["n"]) for k, v in st.items()}
