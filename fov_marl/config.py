@@ -43,21 +43,50 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 
-from fov_marl.validation import ConfigError, check_int, check_real
+from fov_marl.validation import (
+    ConfigError,
+    check_budget,
+    check_choice,
+    check_int,
+    check_real,
+    check_real_array,
+    check_real_sequence,
+    is_real,
+)
 
-__all__ = ["ConfigError", "ScenarioConfig", "make_config"]
+__all__ = [
+    "ConfigError",
+    "ScenarioConfig",
+    "make_config",
+    "MAX_LENGTH_M",
+    "MAX_SPEED",
+    "MAX_REWARD_WEIGHT",
+    "MAX_ETA_CELLS_PER_AXIS",
+    "MAX_ETA_STENCIL",
+]
 
 Scenario = Literal["coverage", "crossing"]
+_SCENARIOS = ("coverage", "crossing")
 
-
-_check_range = check_real
-_check_int = check_int
+#: Upper bound of every length field (m): squared distances, float32 observation
+#: bounds and rendered shapes stay finite and exact far below it.
+MAX_LENGTH_M = 1e6
+#: Upper bound of ``v_max_mps`` (m/s) and ``omega_max_radps`` (rad/s).
+MAX_SPEED = 1e6
+#: Upper bound of every reward weight (rewards stay finite: at most ~1e12 per step).
+MAX_REWARD_WEIGHT = 1e9
+#: Resource guard, coverage: the η quadrature grid has ``ceil(L / eta_grid_m)`` cells
+#: per axis (1-d arrays; 400 at the defaults); at most this many.
+MAX_ETA_CELLS_PER_AXIS = 20_000
+#: Resource guard, coverage: each step η touches ``n_agents * (2 R_s / eta_grid_m + 3)``
+#: stencil rows (several float64 temporaries of that size; 738 at the defaults, 31 488
+#: at N = 256); at most this many (~16 MB per temporary, ~0.1 s per step).
+MAX_ETA_STENCIL = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -67,44 +96,66 @@ class ScenarioConfig:
     Units are SI (metres, seconds, radians) except ``fov_deg`` (degrees, the one
     user-facing angle). See the module docstring for the source of each default.
 
+    Every field is type-checked (:mod:`fov_marl.validation`: reals must be real
+    numbers, not bools, strings or complex; integers must be integers; NumPy scalars
+    are accepted and stored as Python numbers) and range-checked; the first bad field
+    raises :class:`ConfigError` (a ``ValueError``) naming the field, the value and the
+    allowed range. Checks that tie a field to others apply only to the scenario the
+    field concerns: crossing fields never constrain a coverage config and vice versa
+    (their type and sign are still checked). Lengths are at most ``MAX_LENGTH_M`` =
+    1e6 m, speeds ``MAX_SPEED`` = 1e6, reward weights ``MAX_REWARD_WEIGHT`` = 1e9.
+
     Attributes:
         scenario: ``"coverage"`` (paper VII-A/B/C) or ``"crossing"`` (VII-D).
-        n_agents: number of robots N, in [1, 256].
+        n_agents: number of robots N, an integer in [1, 256].
         arena_size_m: side L of the square arena Q = [0, L]^2, in [5, 1000] m.
         fov_deg: camera amplitude beta, in (0, 360] degrees; the sector is centred
             on the body x axis and turns with the robot's yaw.
-        detection_range_m: camera range R_d, in (0, inf) m.
-        sensing_radius_m: coverage sensing radius R_s, in (0, inf) m.
-        safety_distance_m: D_s, in (0, inf) m; must exceed ``2 * robot_radius_m``.
+        detection_range_m: camera range R_d, in (0, 1e6] m.
+        sensing_radius_m: coverage sensing radius R_s, in (0, 1e6] m. Coverage
+            resource guard: ``n_agents * (2 R_s / eta_grid_m + 3) <= MAX_ETA_STENCIL``
+            (2e6; R_s <= 1000 m at N = 1 and the default grid, 39 m at N = 256).
+        safety_distance_m: D_s, in (2 * robot_radius_m, 1e6] m.
         robot_radius_m: physical radius; two robots collide when their centres are
-            closer than ``2 * robot_radius_m``. In (0, inf) m.
-        v_max_mps: maximum planar speed, in (0, inf) m/s.
-        omega_max_radps: maximum yaw rate, in (0, inf) rad/s.
-        meas_cov_diag: diagonal of Sigma_MEAS for (x m^2, y m^2, theta rad^2), each
-            in [0, inf); 0 gives noiseless measurements.
+            closer than ``2 * robot_radius_m``. In (0, arena_size_m / 4) m.
+        v_max_mps: maximum planar speed, in (0, 1e6] m/s.
+        omega_max_radps: maximum yaw rate, in (0, 1e6] rad/s.
+        meas_cov_diag: diagonal of Sigma_MEAS for (x m^2, y m^2, theta rad^2), three
+            reals each in [0, 1e6]; 0 gives noiseless measurements.
         meas_noise_clip_sigma: measurement noise is truncated at this many standard
-            deviations (so observations stay inside their Box), in [1, inf).
-        density_mean_m: q_m, world (x, y) m, inside the arena.
-        density_sigma_m: standard deviation of the Gaussian phi(q), in (0, inf) m.
+            deviations (so observations stay inside their Box), in [1, 1000].
+        density_mean_m: q_m, world (x, y) m, two reals; coverage: inside the arena,
+            each in [0, L]. Default: the arena centre, (20, 20) for L = 40 m;
+            :func:`make_config` keeps it at the centre when only ``arena_size_m``
+            changes.
+        density_sigma_m: standard deviation of the Gaussian phi(q), in (0, 1e6] m;
+            coverage: at least ``eta_grid_m`` (the η quadrature must resolve phi).
         dt_s: control period and integration step, in (0, 5] s.
-        max_cycles: steps before truncation, in [1, inf).
-        initial_poses: optional (N, 3) world [x m, y m, yaw rad]; inside the arena
-            (at least one robot radius from each wall), no two robots closer than
-            two radii. ``None`` draws them from the seeded generator.
+        max_cycles: steps before truncation, an integer in [1, inf).
+        initial_poses: optional (N, 3) world [x m, y m, yaw rad] (an int/float array
+            or nested lists of reals, finite); inside the arena (at least one robot
+            radius from each wall), no two robots closer than two radii. ``None``
+            draws them from the seeded generator. Stored as a read-only float64 copy.
         init_min_separation_m: minimum pairwise distance of random start
-            positions, in [2 * robot_radius_m, inf) m.
+            positions, in [2 * robot_radius_m, 1e6] m.
         crossing_radius_m: crossing scenario: starts and targets lie on a circle
-            of this radius around the arena centre, in (0, L/2 - robot_radius_m].
+            of this radius around the arena centre, in (0, 1e6] m; crossing: in
+            (0, L/2 - robot_radius_m].
         crossing_jitter_m: crossing scenario: uniform jitter of starts and
-            targets, in [0, inf) m.
+            targets, in [0, 1e6] m; crossing: in [0, L/2].
         target_tolerance_m: crossing: a robot has arrived when closer than this to
-            its target, in (0, inf) m.
+            its target, in (0, 1e6] m.
         eta_grid_m: quadrature cell size for the coverage efficiency, in (0, 1] m.
-        reward_eta_gain: coverage reward per unit gain of eta, in [0, inf).
-        progress_gain: crossing reward per metre of progress, in [0, inf).
-        arrival_bonus: crossing reward the first step a robot is within tolerance.
-        collision_penalty: reward subtracted per collision a robot is part of, [0, inf).
-        safety_penalty: reward subtracted per D_s violation a robot is part of, [0, inf).
+            Coverage resource guard: ``ceil(L / eta_grid_m) <= MAX_ETA_CELLS_PER_AXIS``
+            (20 000: eta_grid_m >= 0.002 m at L = 40 m) and the stencil bound above.
+        reward_eta_gain: coverage reward per unit gain of eta, in [0, 1e9].
+        progress_gain: crossing reward per metre of progress, in [0, 1e9].
+        arrival_bonus: crossing reward the first step a robot is within tolerance,
+            in [0, 1e9].
+        collision_penalty: reward subtracted per collision a robot is part of,
+            in [0, 1e9].
+        safety_penalty: reward subtracted per D_s violation a robot is part of,
+            in [0, 1e9].
     """
 
     scenario: Scenario = "coverage"
@@ -136,62 +187,85 @@ class ScenarioConfig:
     safety_penalty: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.scenario not in ("coverage", "crossing"):
-            raise ConfigError(
-                f"scenario must be one of ('coverage', 'crossing'), got {self.scenario!r}"
-            )
-        _check_int("n_agents", self.n_agents, 1, 256)
-        _check_int("max_cycles", self.max_cycles, 1)
-        _check_range("arena_size_m", self.arena_size_m, 5.0, 1000.0)
-        _check_range("fov_deg", self.fov_deg, 0.0, 360.0, lo_open=True)
-        for name in (
-            "detection_range_m",
-            "sensing_radius_m",
-            "safety_distance_m",
-            "robot_radius_m",
-            "v_max_mps",
-            "omega_max_radps",
-            "density_sigma_m",
-            "target_tolerance_m",
-        ):
-            _check_range(name, getattr(self, name), 0.0, None, lo_open=True)
-        _check_range("dt_s", self.dt_s, 0.0, 5.0, lo_open=True)
-        _check_range("eta_grid_m", self.eta_grid_m, 0.0, 1.0, lo_open=True)
-        _check_range("meas_noise_clip_sigma", self.meas_noise_clip_sigma, 1.0, None)
-        for name in (
-            "crossing_jitter_m",
-            "reward_eta_gain",
-            "progress_gain",
-            "arrival_bonus",
-            "collision_penalty",
-            "safety_penalty",
-        ):
-            _check_range(name, getattr(self, name), 0.0, None)
+        set_ = object.__setattr__
+        scen = check_choice("scenario", self.scenario, _SCENARIOS)
+        set_(self, "scenario", scen)
+        set_(self, "n_agents", check_int("n_agents", self.n_agents, 1, 256))
+        set_(self, "max_cycles", check_int("max_cycles", self.max_cycles, 1))
+        for name, (lo, hi, lo_open) in _REAL_FIELDS.items():
+            set_(self, name, check_real(name, getattr(self, name), lo, hi, lo_open=lo_open))
 
-        r = float(self.robot_radius_m)
-        L = float(self.arena_size_m)
-        if r >= L / 4:
-            raise ConfigError(f"robot_radius_m must be in (0, arena_size_m/4 = {L / 4}), got {r}")
-        if self.safety_distance_m <= 2 * r:
-            raise ConfigError(
-                f"safety_distance_m must be in (2 * robot_radius_m = {2 * r}, inf), "
-                f"got {self.safety_distance_m}"
-            )
-        _check_range("init_min_separation_m", self.init_min_separation_m, 2 * r, None)
-        _check_range("crossing_radius_m", self.crossing_radius_m, 0.0, L / 2 - r, lo_open=True)
+        r, L = self.robot_radius_m, self.arena_size_m
+        check_real(
+            "robot_radius_m", r, 0.0, L / 4, lo_open=True, hi_open=True,
+            note=f"(below arena_size_m / 4 = {L / 4})",
+        )  # fmt: skip
+        check_real(
+            "safety_distance_m", self.safety_distance_m, 2 * r, MAX_LENGTH_M, lo_open=True,
+            note=f"(above 2 * robot_radius_m = {2 * r})",
+        )  # fmt: skip
+        check_real(
+            "init_min_separation_m", self.init_min_separation_m, 2 * r, MAX_LENGTH_M,
+            note=f"(at least 2 * robot_radius_m = {2 * r})",
+        )  # fmt: skip
 
-        cov = _as_float_tuple("meas_cov_diag", self.meas_cov_diag, 3)
-        for k, c in zip(("x", "y", "theta"), cov, strict=True):
-            _check_range(f"meas_cov_diag[{k}]", c, 0.0, None)
-        object.__setattr__(self, "meas_cov_diag", cov)
+        cov = check_real_sequence(
+            "meas_cov_diag", self.meas_cov_diag, 3, 0.0, 1e6, labels=("x", "y", "theta")
+        )
+        set_(self, "meas_cov_diag", cov)
+        qm = check_real_sequence(
+            "density_mean_m", self.density_mean_m, 2, -MAX_LENGTH_M, MAX_LENGTH_M, labels="xy"
+        )
+        set_(self, "density_mean_m", qm)
 
-        qm = _as_float_tuple("density_mean_m", self.density_mean_m, 2)
-        for k, c in zip(("x", "y"), qm, strict=True):
-            _check_range(f"density_mean_m[{k}]", c, 0.0, L)
-        object.__setattr__(self, "density_mean_m", qm)
+        if scen == "coverage":
+            self._check_coverage()
+        else:
+            self._check_crossing()
 
         if self.initial_poses is not None:
-            object.__setattr__(self, "initial_poses", self._validated_poses(self.initial_poses))
+            set_(self, "initial_poses", self._validated_poses(self.initial_poses))
+
+    def _check_coverage(self) -> None:
+        """Cross-field checks of the coverage scenario and its resource guards."""
+        L, h = self.arena_size_m, self.eta_grid_m
+        for k, c in zip("xy", self.density_mean_m, strict=True):
+            check_real(
+                f"density_mean_m[{k}]", c, 0.0, L, note=f"(inside the arena, arena_size_m = {L})"
+            )
+        check_real(
+            "density_sigma_m", self.density_sigma_m, h, MAX_LENGTH_M,
+            note=f"(at least eta_grid_m = {h}, so the eta quadrature resolves the density)",
+        )  # fmt: skip
+        cells = math.ceil(L / h - 1e-9)
+        check_budget(
+            "eta_grid_m",
+            cells,
+            MAX_ETA_CELLS_PER_AXIS,
+            f"= {h} with arena_size_m = {L}: the eta quadrature grid",
+            "cells per axis",
+        )
+        stencil = self.n_agents * (math.floor(2.0 * self.sensing_radius_m / h) + 3)
+        check_budget(
+            "sensing_radius_m",
+            stencil,
+            MAX_ETA_STENCIL,
+            f"= {self.sensing_radius_m} with eta_grid_m = {h} and n_agents = {self.n_agents}: "
+            "the eta stencil, n_agents * (2 sensing_radius_m / eta_grid_m + 3),",
+            "rows",
+        )
+
+    def _check_crossing(self) -> None:
+        """Cross-field checks of the crossing scenario."""
+        L, r = self.arena_size_m, self.robot_radius_m
+        check_real(
+            "crossing_radius_m", self.crossing_radius_m, 0.0, L / 2 - r, lo_open=True,
+            note=f"(arena_size_m / 2 - robot_radius_m, with arena_size_m = {L})",
+        )  # fmt: skip
+        check_real(
+            "crossing_jitter_m", self.crossing_jitter_m, 0.0, L / 2,
+            note=f"(arena_size_m / 2, with arena_size_m = {L})",
+        )  # fmt: skip
 
     # ------------------------------------------------------------------ derived
     @property
@@ -229,19 +303,10 @@ class ScenarioConfig:
         return out
 
     def _validated_poses(self, poses: Any) -> np.ndarray:
-        try:
-            arr = np.array(poses, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ConfigError(
-                f"initial_poses must be an array of shape ({self.n_agents}, 3), got {poses!r}"
-            ) from None
-        if arr.shape != (self.n_agents, 3):
-            raise ConfigError(
-                f"initial_poses must have shape (n_agents, 3) = ({self.n_agents}, 3) "
-                f"[x m, y m, yaw rad], got shape {arr.shape}"
-            )
-        if not np.all(np.isfinite(arr)):
-            raise ConfigError("initial_poses must be finite, got NaN or inf")
+        n = self.n_agents
+        arr = check_real_array(
+            "initial_poses", poses, (n, 3), f"(n_agents, 3) = ({n}, 3) [x m, y m, yaw rad]"
+        )
         r, L = self.robot_radius_m, self.arena_size_m
         bad = np.flatnonzero(np.any((arr[:, :2] < r) | (arr[:, :2] > L - r), axis=1))
         if bad.size:
@@ -264,14 +329,30 @@ class ScenarioConfig:
         return arr
 
 
-def _as_float_tuple(name: str, value: Any, n: int) -> tuple[float, ...]:
-    try:
-        arr = np.asarray(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a sequence of {n} real numbers, got {value!r}") from None
-    if arr.size != n:
-        raise ConfigError(f"{name} must be a sequence of {n} real numbers, got {value!r}")
-    return tuple(float(x) for x in arr)
+#: Real fields with a fixed range: name -> (lo, hi, lo_open); hi is always closed.
+_REAL_FIELDS: dict[str, tuple[float, float, bool]] = {
+    "arena_size_m": (5.0, 1000.0, False),
+    "fov_deg": (0.0, 360.0, True),
+    "detection_range_m": (0.0, MAX_LENGTH_M, True),
+    "sensing_radius_m": (0.0, MAX_LENGTH_M, True),
+    "safety_distance_m": (0.0, MAX_LENGTH_M, True),
+    "robot_radius_m": (0.0, MAX_LENGTH_M, True),
+    "v_max_mps": (0.0, MAX_SPEED, True),
+    "omega_max_radps": (0.0, MAX_SPEED, True),
+    "meas_noise_clip_sigma": (1.0, 1000.0, False),
+    "density_sigma_m": (0.0, MAX_LENGTH_M, True),
+    "dt_s": (0.0, 5.0, True),
+    "init_min_separation_m": (0.0, MAX_LENGTH_M, True),
+    "crossing_radius_m": (0.0, MAX_LENGTH_M, True),
+    "crossing_jitter_m": (0.0, MAX_LENGTH_M, False),
+    "target_tolerance_m": (0.0, MAX_LENGTH_M, True),
+    "eta_grid_m": (0.0, 1.0, True),
+    "reward_eta_gain": (0.0, MAX_REWARD_WEIGHT, False),
+    "progress_gain": (0.0, MAX_REWARD_WEIGHT, False),
+    "arrival_bonus": (0.0, MAX_REWARD_WEIGHT, False),
+    "collision_penalty": (0.0, MAX_REWARD_WEIGHT, False),
+    "safety_penalty": (0.0, MAX_REWARD_WEIGHT, False),
+}
 
 
 _FIELDS = frozenset(f.name for f in dataclasses.fields(ScenarioConfig))
@@ -287,7 +368,11 @@ def make_config(
             scenario's defaults).
         scenario: ``"coverage"`` or ``"crossing"``; the crossing defaults differ
             only in ``n_agents = 4``.
-        **kwargs: any field of :class:`ScenarioConfig`.
+        **kwargs: any field of :class:`ScenarioConfig`. When ``arena_size_m`` is
+            given without ``density_mean_m`` and the density mean is at the centre of
+            the old arena (the default), it moves to the centre of the new one; when
+            ``n_agents`` is given without ``initial_poses``, poses of ``base`` are
+            dropped.
 
     Raises:
         ConfigError: an unknown keyword (the message lists the valid ones) or an
@@ -299,13 +384,33 @@ def make_config(
             f"unknown config field(s) {unknown}; valid fields are {sorted(_FIELDS - {'scenario'})}"
         )
     if base is None:
-        scen = scenario or "coverage"
-        defaults: Mapping[str, Any] = {"n_agents": 4} if scen == "crossing" else {}
-        return ScenarioConfig(scenario=scen, **{**defaults, **kwargs})
+        scen: Any = "coverage" if scenario is None else scenario
+        defaults: dict[str, Any] = {"n_agents": 4} if scen == "crossing" else {}
+        values = {**defaults, **kwargs}
+        _centre_density(values, _DEFAULT.arena_size_m, _DEFAULT.density_mean_m)
+        return ScenarioConfig(scenario=scen, **values)
+    if not isinstance(base, ScenarioConfig):
+        raise ConfigError(f"base must be a ScenarioConfig or None, got {type(base).__name__}")
     values = {f.name: getattr(base, f.name) for f in dataclasses.fields(base)}
     if scenario is not None:
         values["scenario"] = scenario
     if "n_agents" in kwargs and "initial_poses" not in kwargs:
         values["initial_poses"] = None
-    values.update(kwargs)
+    given = dict(kwargs)
+    _centre_density(given, base.arena_size_m, base.density_mean_m)
+    values.update(given)
     return ScenarioConfig(**values)
+
+
+def _centre_density(kwargs: dict[str, Any], old_arena: float, old_mean: tuple) -> None:
+    """Keep q_m at the arena centre when only ``arena_size_m`` changes (in place)."""
+    if "arena_size_m" not in kwargs or "density_mean_m" in kwargs:
+        return
+    L = kwargs["arena_size_m"]
+    if not is_real(L) or not math.isfinite(float(L)):
+        return  # the field check reports it
+    if tuple(old_mean) == (old_arena / 2, old_arena / 2):
+        kwargs["density_mean_m"] = (float(L) / 2, float(L) / 2)
+
+
+_DEFAULT = ScenarioConfig()

@@ -1,27 +1,110 @@
-"""Argument validation shared by every config dataclass.
+"""Typed argument validation shared by every config dataclass, the envs and the CLI.
 
-Each check raises :class:`ConfigError` (a ``ValueError``) whose message names the
-field and the allowed range, e.g. ``fov_deg must be in (0.0, 360.0], got 400.0``.
+One module, one error type. Each check raises :class:`ConfigError` (a ``ValueError``)
+whose message names the field, the value it got and the allowed range, e.g.
+``fov_deg must be in (0.0, 360.0], got 400.0``, and returns the value normalised to a
+plain Python type (``float``, ``int``, ``bool``, ``str``, a tuple of floats or a
+read-only float64 array), so a NumPy scalar given by the user never leaks into a
+config (and configs stay JSON-friendly).
+
+Typing rules (the same for every field of every config):
+
+* real: ``int``, ``float``, ``fractions.Fraction``, NumPy integer/floating scalars and
+  0-d integer/floating arrays; ``bool``, ``str``, ``bytes``, ``complex`` (even with a
+  zero imaginary part), ``None`` and containers are rejected; NaN and inf are rejected
+  (no field takes them).
+* integer: ``int``, NumPy integer scalars and 0-d integer arrays; ``bool`` and floats
+  (even ``2.0``) are rejected.
+* bool: ``bool`` or ``numpy.bool_``; ``0``/``1`` and strings are rejected.
+* choice: a ``str`` from the listed options.
+* sequence of n reals: a list, tuple or 1-d array of exactly n reals (each typed as
+  above); a ``str`` is not a sequence of numbers.
+* array: nested lists/tuples of reals or an integer/floating ndarray of the exact shape.
+
+Nothing is silently clipped: out of range is an error.
 """
 
 from __future__ import annotations
 
 import math
+import numbers
+from collections.abc import Collection, Iterable, Sequence
 from typing import Any
 
 import numpy as np
 
-__all__ = ["ConfigError", "check_real", "check_int", "check_bool"]
+__all__ = [
+    "ConfigError",
+    "describe",
+    "fmt_number",
+    "is_real",
+    "is_integer",
+    "check_real",
+    "check_int",
+    "check_bool",
+    "check_choice",
+    "check_real_sequence",
+    "check_real_array",
+    "check_keys",
+    "check_seed",
+    "check_budget",
+    "as_real_vector",
+]
 
 
 class ConfigError(ValueError):
-    """A configuration field is missing, unknown or out of its allowed range."""
+    """A configuration field is missing, unknown, wrongly typed or out of its range."""
+
+
+_REPR_MAX = 80
+
+
+def describe(value: Any) -> str:
+    """``repr(value)`` shortened to ~80 characters, with the type when it is not obvious
+    from the repr (``'2.5' (str)``, ``(1+0j) (complex)``, ``array([1.]) (ndarray)``)."""
+    try:
+        text = repr(value)
+    except Exception:  # a hostile __repr__ must not replace the real error
+        text = f"<{type(value).__name__} object>"
+    if len(text) > _REPR_MAX:
+        text = text[: _REPR_MAX - 3] + "..."
+    if isinstance(value, bool | int | float) and type(value) in (bool, int, float):
+        return text
+    return f"{text} ({type(value).__name__})"
+
+
+def is_real(value: Any) -> bool:
+    """True for a real number as defined in the module docstring (finite or not)."""
+    if isinstance(value, bool | np.bool_):
+        return False
+    if isinstance(value, numbers.Real):
+        return True
+    return isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iuf"
+
+
+def is_integer(value: Any) -> bool:
+    """True for an integer as defined in the module docstring."""
+    if isinstance(value, bool | np.bool_):
+        return False
+    if isinstance(value, numbers.Integral):
+        return True
+    return isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iu"
+
+
+def fmt_number(x: float) -> str:
+    """A bound as people write it: ``5.0``, ``0.25``, ``1e6``, ``1e-8`` (not ``1000000.0``)."""
+    if isinstance(x, float) and x != 0.0 and (abs(x) >= 1e5 or abs(x) < 1e-4):
+        m, e = f"{x:.6g}".split("e") if "e" in f"{x:.6g}" else (f"{x:.6g}", "")
+        return f"{m}e{int(e)}" if e else m
+    return str(x)
 
 
 def _interval(lo: float | None, hi: float | None, lo_open: bool, hi_open: bool) -> str:
     lo_b = "(" if lo_open or lo is None else "["
     hi_b = ")" if hi_open or hi is None else "]"
-    return f"{lo_b}{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}{hi_b}"
+    lo_t = "-inf" if lo is None else fmt_number(lo)
+    hi_t = "inf" if hi is None else fmt_number(hi)
+    return f"{lo_b}{lo_t}, {hi_t}{hi_b}"
 
 
 def check_real(
@@ -32,33 +115,234 @@ def check_real(
     *,
     lo_open: bool = False,
     hi_open: bool = False,
-) -> None:
-    """``value`` must be a finite real (not a bool) inside the interval."""
-    allowed = _interval(lo, hi, lo_open, hi_open)
-    if isinstance(value, bool | np.bool_):
-        raise ConfigError(f"{name} must be a real number in {allowed}, got {value!r}")
+    note: str = "",
+) -> float:
+    """``value`` must be a finite real (see the module docstring) inside the interval.
+
+    Args:
+        name: field name used in the message.
+        lo, hi: bounds (None: unbounded on that side).
+        lo_open, hi_open: exclude the bound itself.
+        note: appended to the message after the range (e.g. which fields set a bound).
+
+    Returns:
+        ``float(value)``.
+    """
+    allowed = _interval(lo, hi, lo_open, hi_open) + (f" {note}" if note else "")
+    if not is_real(value):
+        raise ConfigError(f"{name} must be a real number in {allowed}, got {describe(value)}")
     try:
         v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a real number in {allowed}, got {value!r}") from None
+    except OverflowError:
+        v = math.inf if value > 0 else -math.inf
     if not math.isfinite(v):
-        raise ConfigError(f"{name} must be finite and in {allowed}, got {value!r}")
+        raise ConfigError(f"{name} must be finite and in {allowed}, got {describe(value)}")
     if lo is not None and (v < lo or (lo_open and v == lo)):
-        raise ConfigError(f"{name} must be in {allowed}, got {value!r}")
+        raise ConfigError(f"{name} must be in {allowed}, got {describe(value)}")
     if hi is not None and (v > hi or (hi_open and v == hi)):
-        raise ConfigError(f"{name} must be in {allowed}, got {value!r}")
+        raise ConfigError(f"{name} must be in {allowed}, got {describe(value)}")
+    return v
 
 
-def check_int(name: str, value: Any, lo: int, hi: int | None = None) -> None:
-    """``value`` must be an integer (not a bool) in ``[lo, hi]``."""
-    allowed = f"[{lo}, inf)" if hi is None else f"[{lo}, {hi}]"
-    if isinstance(value, bool | np.bool_) or not isinstance(value, int | np.integer):
-        raise ConfigError(f"{name} must be an integer in {allowed}, got {value!r}")
-    if value < lo or (hi is not None and value > hi):
-        raise ConfigError(f"{name} must be an integer in {allowed}, got {value!r}")
+def check_int(name: str, value: Any, lo: int, hi: int | None = None, *, note: str = "") -> int:
+    """``value`` must be an integer (not a bool, not a float) in ``[lo, hi]``.
+
+    Returns:
+        ``int(value)``.
+    """
+    allowed = (f"[{lo}, inf)" if hi is None else f"[{lo}, {hi}]") + (f" {note}" if note else "")
+    if not is_integer(value):
+        raise ConfigError(f"{name} must be an integer in {allowed}, got {describe(value)}")
+    v = int(value)
+    if v < lo or (hi is not None and v > hi):
+        raise ConfigError(f"{name} must be an integer in {allowed}, got {describe(value)}")
+    return v
 
 
-def check_bool(name: str, value: Any) -> None:
-    """``value`` must be a bool."""
+def check_bool(name: str, value: Any) -> bool:
+    """``value`` must be a bool (``True``/``False`` or ``numpy.bool_``).
+
+    Returns:
+        ``bool(value)``.
+    """
     if not isinstance(value, bool | np.bool_):
-        raise ConfigError(f"{name} must be a bool, got {value!r}")
+        raise ConfigError(f"{name} must be a bool (True or False), got {describe(value)}")
+    return bool(value)
+
+
+def check_choice(name: str, value: Any, choices: Sequence[str]) -> str:
+    """``value`` must be one of the strings ``choices``.
+
+    Returns:
+        ``str(value)``.
+    """
+    if not isinstance(value, str) or value not in choices:
+        raise ConfigError(f"{name} must be one of {tuple(choices)}, got {describe(value)}")
+    return str(value)
+
+
+def _is_sequence(value: Any) -> bool:
+    if isinstance(value, str | bytes | bytearray):
+        return False
+    return isinstance(value, list | tuple | np.ndarray)
+
+
+def check_real_sequence(
+    name: str,
+    value: Any,
+    n: int,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    labels: Sequence[str] | None = None,
+    note: str = "",
+) -> tuple[float, ...]:
+    """``value`` must be a list, tuple or 1-d array of ``n`` finite reals in the interval.
+
+    Element k is reported as ``name[labels[k]]`` (or ``name[k]``).
+
+    Returns:
+        A tuple of ``n`` Python floats.
+    """
+    what = f"{name} must be a sequence of {n} real numbers"
+    if not _is_sequence(value):
+        raise ConfigError(f"{what}, got {describe(value)}")
+    if isinstance(value, np.ndarray):
+        if value.ndim != 1 or value.dtype.kind not in "iuf":
+            raise ConfigError(
+                f"{what} (a 1-d integer or floating array), got an array of shape "
+                f"{value.shape} and dtype {value.dtype}"
+            )
+    if len(value) != n:
+        raise ConfigError(f"{what}, got {len(value)}: {describe(value)}")
+    out = []
+    for k, x in enumerate(value):
+        label = labels[k] if labels is not None else str(k)
+        out.append(
+            check_real(f"{name}[{label}]", x, lo, hi, lo_open=lo_open, hi_open=hi_open, note=note)
+        )
+    return tuple(out)
+
+
+def _nested_reals(value: Any, shape: tuple[int, ...], path: str, name: str, text: str) -> None:
+    """Check that nested lists/tuples/arrays hold reals with exactly ``shape``."""
+    if not shape:
+        if not is_real(value):
+            raise ConfigError(f"{name}{path} must be a real number, got {describe(value)}")
+        return
+    if not _is_sequence(value) or (isinstance(value, np.ndarray) and value.ndim == 0):
+        raise ConfigError(
+            f"{name}{path} must be a sequence of length {shape[0]} ({name} has shape {text}), "
+            f"got {describe(value)}"
+        )
+    if len(value) != shape[0]:
+        raise ConfigError(
+            f"{name}{path} must have length {shape[0]} ({name} has shape {text}), "
+            f"got length {len(value)}"
+        )
+    for k, x in enumerate(value):
+        _nested_reals(x, shape[1:], f"{path}[{k}]", name, text)
+
+
+def check_real_array(
+    name: str, value: Any, shape: tuple[int, ...], shape_text: str = ""
+) -> np.ndarray:
+    """``value`` must be an array of finite reals of exactly ``shape``.
+
+    Accepted: an ndarray of integer or floating dtype, or nested lists/tuples whose
+    leaves are reals (module docstring). Rejected: strings, bools, complex, object
+    arrays, ragged nesting, a wrong shape, NaN or inf.
+
+    Args:
+        shape_text: how the shape is stated in messages (default ``str(shape)``).
+
+    Returns:
+        A new float64 array of ``shape`` (writable; the caller may freeze it).
+    """
+    text = shape_text or str(shape)
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "iuf":
+            raise ConfigError(
+                f"{name} must be an integer or floating array of shape {text}, "
+                f"got dtype {value.dtype}"
+            )
+        if value.shape != shape:
+            raise ConfigError(f"{name} must have shape {text}, got shape {value.shape}")
+    elif not _is_sequence(value):
+        raise ConfigError(
+            f"{name} must be an array of shape {text} (an ndarray or nested lists), "
+            f"got {describe(value)}"
+        )
+    else:
+        _nested_reals(value, shape, "", name, text)
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except OverflowError:
+        raise ConfigError(f"{name} must be finite, got an entry beyond float64's range") from None
+    if not np.all(np.isfinite(arr)):
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+        raise ConfigError(f"{name} must be finite, got {arr[bad]} at index {list(bad)}")
+    return arr
+
+
+def check_keys(what: str, given: Iterable[Any], valid: Collection[str]) -> None:
+    """Every key of ``given`` must be one of ``valid`` (the message lists them)."""
+    unknown = [k for k in given if k not in valid]
+    if unknown:
+        shown = sorted(repr(k) if not isinstance(k, str) else k for k in unknown)
+        raise ConfigError(f"unknown {what} {shown}; valid {what} are {sorted(valid)}")
+
+
+def check_seed(name: str, value: Any) -> int | None:
+    """A seed: ``None`` or a non-negative integer (what ``numpy.random.default_rng``
+    takes).
+
+    Returns:
+        ``None`` or ``int(value)``.
+    """
+    if value is None:
+        return None
+    return check_int(name, value, 0, note="(or None)")
+
+
+def check_budget(name: str, need: float, limit: float, what: str, unit: str = "") -> None:
+    """Resource guard: ``need`` (what ``name`` would cost) must not exceed ``limit``.
+
+    The message names the field, what it costs and the stated limit, e.g.
+    ``eta_grid_m = 1e-05 needs 4000000 grid cells per axis; the limit is 20000``.
+    """
+    if not need <= limit:  # also catches NaN
+        u = f" {unit}" if unit else ""
+        raise ConfigError(f"{name}: {what} would need {need:.6g}{u}; the limit is {limit:g}{u}")
+
+
+def as_real_vector(name: str, value: Any, n: int) -> np.ndarray | str:
+    """``value`` as a float64 vector of length ``n``, or the text of what is wrong.
+
+    Used on hot paths (actions, every step): it returns an error description instead
+    of raising, so the caller can name the agent. Accepted: an integer or floating
+    array (any array-like: list, tuple, ndarray, tensors with ``__array__``) of shape
+    ``(n,)``; rejected: str/bytes/bool/complex/object data, another shape. Finiteness
+    is left to the caller (one vectorised check for the whole team).
+    """
+    if isinstance(value, str | bytes | bytearray):
+        return f"must be a ({n},) array of real numbers, got {describe(value)}"
+    try:
+        x = np.asarray(value)
+    except Exception as exc:  # ragged lists, objects whose __array__ fails
+        return f"must be a ({n},) array of real numbers, got {describe(value)} ({exc})"
+    if x.dtype.kind not in "iuf":
+        if x.dtype.kind == "c":
+            kind = "complex numbers"
+        elif x.dtype.kind == "b":
+            kind = "bools"
+        elif x.dtype.kind in "USa":
+            kind = "strings"
+        else:
+            kind = f"dtype {x.dtype}"
+        return f"must be a ({n},) array of real numbers, got {kind}: {describe(value)}"
+    if x.shape != (n,):
+        return f"must have shape ({n},), got shape {x.shape}"
+    return x.astype(np.float64, copy=False)

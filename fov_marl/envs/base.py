@@ -7,6 +7,7 @@ the machinery: config, spaces, seeding, stepping, metrics, rendering.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium
@@ -19,6 +20,7 @@ from fov_marl.envs.world import Camera, step_poses
 from fov_marl.geometry import world_to_body
 from fov_marl.metrics import CoverageMetric, pairwise_distances
 from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, ObservationLayout, action_to_velocity
+from fov_marl.validation import ConfigError, as_real_vector, check_seed, describe
 
 __all__ = ["FovEnvBase"]
 
@@ -35,11 +37,20 @@ class FovEnvBase(ParallelEnv):
     scenario: str = "coverage"
 
     def __init__(self, render_mode: str | None = None, **config_kwargs: Any) -> None:
-        if render_mode not in (None, *self.metadata["render_modes"]):
+        modes = self.metadata["render_modes"]
+        if render_mode is not None and not (isinstance(render_mode, str) and render_mode in modes):
             raise ValueError(
-                f"render_mode must be one of {[None, *self.metadata['render_modes']]}, "
-                f"got {render_mode!r}"
+                f"render_mode must be one of {[None, *modes]}, got {describe(render_mode)}"
             )
+        if "scenario" in config_kwargs:
+            # the env fixes its scenario: the same value is accepted, another is an error
+            given = config_kwargs.pop("scenario")
+            if not (isinstance(given, str) and given == self.scenario):
+                other = isinstance(given, str) and given in ("coverage", "crossing")
+                raise ConfigError(
+                    f"scenario is fixed to {self.scenario!r} by {self.metadata['name']}, got "
+                    f"{describe(given)}" + (f"; use fov_{given}_v0 instead" if other else "")
+                )
         self.config: ScenarioConfig = make_config(scenario=self.scenario, **config_kwargs)
         cfg = self.config
         self.render_mode = render_mode
@@ -138,6 +149,9 @@ class FovEnvBase(ParallelEnv):
     def reset(
         self, seed: int | None = None, options: dict | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+        seed = check_seed("seed", seed)
+        if options is not None and not isinstance(options, Mapping):
+            raise ValueError(f"options must be a dict or None, got {describe(options)}")
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
         self.agents = list(self.possible_agents)
@@ -180,8 +194,18 @@ class FovEnvBase(ParallelEnv):
         return obs, rewards, terminations, truncations, infos
 
     def _validate_actions(self, actions: dict[str, Any]) -> np.ndarray:
-        if not isinstance(actions, dict):
-            raise ValueError(f"actions must be a dict agent -> (3,) array, got {type(actions)}")
+        """``(N, 3)`` float64 actions of the live agents (rows of finished agents zero).
+
+        Every live agent needs an action: an integer or floating array-like of shape
+        ``(3,)`` with finite entries (values outside ``[-1, 1]`` are clipped later, as
+        the module docstrings say). Strings, bools, complex numbers, object arrays,
+        another shape, NaN/inf, unknown or missing agents raise ``ValueError`` naming
+        the agent. :class:`~fov_marl.wrappers.SafetyFilterWrapper` calls this too.
+        """
+        if not isinstance(actions, Mapping):
+            raise ValueError(
+                f"actions must be a dict agent -> (3,) array, got {type(actions).__name__}"
+            )
         extra = [a for a in actions if a not in self.agents]
         if extra:
             raise ValueError(f"actions given for unknown or finished agent(s) {extra}")
@@ -190,14 +214,9 @@ class FovEnvBase(ParallelEnv):
             raise ValueError(f"actions missing for agent(s) {missing}")
         out = np.zeros((self.config.n_agents, 3))
         for a in self.agents:
-            try:
-                x = np.asarray(actions[a], dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ValueError(
-                    f"action of {a} must be a (3,) array of finite numbers, got {actions[a]!r}"
-                ) from None
-            if x.shape != (3,):
-                raise ValueError(f"action of {a} must have shape (3,), got shape {x.shape}")
+            x = as_real_vector(a, actions[a], 3)
+            if isinstance(x, str):
+                raise ValueError(f"action of {a} {x}")
             out[self.agent_name_mapping[a]] = x
         finite = np.isfinite(out).all(axis=1)
         if not finite.all():

@@ -56,11 +56,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
-from fov_marl.validation import check_int, check_real
+from fov_marl.validation import check_bool, check_choice, check_int, check_real
 
-__all__ = ["TrackerParams", "MotionModel", "InitMode", "EgoMotion"]
+__all__ = ["TrackerParams", "MotionModel", "InitMode", "EgoMotion", "MAX_NOISE"]
 
 MotionModel = Literal["auto", "coverage", "crossing", "static"]
 InitMode = Literal["auto", "known", "uniform"]
@@ -70,45 +70,66 @@ _MOTION_MODELS = ("auto", "coverage", "crossing", "static")
 _INIT_MODES = ("auto", "known", "uniform")
 _EGO_MOTIONS = ("action", "pose")
 
+#: Upper bound of the noise intensities and spreads (m/sqrt(s), rad/sqrt(s), m, rad) and
+#: of the other unbounded reals: particle clouds stay finite in float64 far below it.
+MAX_NOISE = 1e6
 
-def _real(name: str, value: Any, lo: float, hi: float | None, lo_open: bool, hi_open: bool = False):
-    check_real(name, value, lo, hi, lo_open=lo_open, hi_open=hi_open)
-
-
-_integer = check_int
+#: Real fields: name -> (lo, hi, lo_open, hi_open).
+_REAL_FIELDS: dict[str, tuple[float, float, bool, bool]] = {
+    "allocation_scale_m": (0.0, MAX_NOISE, True, False),
+    "k_p": (0.0, MAX_NOISE, False, False),
+    "process_noise_m_per_sqrt_s": (0.0, MAX_NOISE, False, False),
+    "heading_noise_rad_per_sqrt_s": (0.0, MAX_NOISE, False, False),
+    "init_spread_m": (0.0, MAX_NOISE, False, False),
+    "init_heading_spread_rad": (0.0, MAX_NOISE, False, False),
+    "confidence": (0.0, 1.0, True, True),
+    "mc_error_factor": (0.0, MAX_NOISE, False, False),
+    "recovery_min_ess": (0.0, 1e9, False, False),
+    "recovery_gate_chi2": (0.0, 1e9, True, False),
+    "min_meas_var": (0.0, MAX_NOISE, True, False),
+}
 
 
 @dataclass(frozen=True)
 class TrackerParams:
     """Parameters of one robot's particle-filter bank; see the module docstring.
 
+    Every field is type-checked and range-checked on construction through
+    :mod:`fov_marl.validation` (reals must be real numbers, not bools, strings or
+    complex; integers must be integers; NumPy scalars are accepted and stored as Python
+    numbers); the first bad field raises :class:`~fov_marl.validation.ConfigError` (a
+    ``ValueError``) naming the field, the value and the allowed range.
+
     Attributes:
-        n_particles_total: P_T, particles shared by all neighbours, in [1, 10_000_000];
-            must be at least the number of neighbours (checked by the tracker, which
-            knows N).
-        min_particles_per_neighbour: floor of each P_j, in [1, inf).
-        allocation_scale_m: s in the importance weight ``1 / (d_ij + s)``, in (0, inf) m.
+        n_particles_total: P_T, particles shared by all neighbours, an integer in
+            [1, 10_000_000] (resource guard: 10^7 particles of 3 float64 are 240 MB per
+            robot); must be at least the number of neighbours (checked by the tracker,
+            which knows N).
+        min_particles_per_neighbour: floor of each P_j, an integer in [1, 10_000_000].
+        allocation_scale_m: s in the importance weight ``1 / (d_ij + s)``, in (0, 1e6] m.
         motion_model: neighbour input u_j^est for the prediction (Eq. 2): ``"coverage"``
             (Eq. 20), ``"crossing"`` (Eq. 22), ``"static"`` (zero input, noise only) or
             ``"auto"`` (from ``config.scenario``).
-        k_p: gain K_p of Eq. 20, in [0, inf) 1/s.
+        k_p: gain K_p of Eq. 20, in [0, 1e6] 1/s.
         coverage_standoff_m: ρ of :func:`~fov_marl.estimation.kernels.coverage_input`,
-            in [0, inf) m, or None for ``sensing_radius_m + safety_distance_m``.
-        process_noise_m_per_sqrt_s: position random-walk intensity q, in [0, inf); each
+            in [0, 1e6] m, or None for ``sensing_radius_m + safety_distance_m``.
+        process_noise_m_per_sqrt_s: position random-walk intensity q, in [0, 1e6]; each
             step adds N(0, q^2 dt) per axis.
-        heading_noise_rad_per_sqrt_s: heading random-walk intensity, in [0, inf).
+        heading_noise_rad_per_sqrt_s: heading random-walk intensity, in [0, 1e6].
         init_mode: ``"known"`` (requires initial poses at reset), ``"uniform"``, or
             ``"auto"`` (known when initial poses are given, else uniform).
-        init_spread_m: std of the known-start cloud per axis, in [0, inf) m.
-        init_heading_spread_rad: std of the known-start heading, in [0, inf) rad.
+        init_spread_m: std of the known-start cloud per axis, in [0, 1e6] m.
+        init_heading_spread_rad: std of the known-start heading, in [0, 1e6] rad.
         confidence: ellipse confidence level, in (0, 1).
-        mc_error_factor: κ ≥ 0 of the Monte Carlo inflation of the reported covariance.
+        mc_error_factor: κ of the Monte Carlo inflation of the reported covariance,
+            in [0, 1e6].
         recovery_min_ess: effective-sample-size threshold of the re-seed around a
-            detection, in [0, inf).
-        recovery_gate_chi2: squared-Mahalanobis gate of the re-seed, in (0, inf).
+            detection, in [0, 1e9].
+        recovery_gate_chi2: squared-Mahalanobis gate of the re-seed, in (0, 1e9].
         ego_motion: ``"action"`` or ``"pose"`` (how Σ_i's own motion is obtained).
-        clamp_to_arena: clamp particle positions to ``[r, L - r]^2`` like the env does.
-        min_meas_var: floor of each Σ_MEAS diagonal entry, in (0, inf).
+        clamp_to_arena: clamp particle positions to ``[r, L - r]^2`` like the env does
+            (a bool).
+        min_meas_var: floor of each Σ_MEAS diagonal entry, in (0, 1e6].
     """
 
     n_particles_total: int = 2000
@@ -131,28 +152,32 @@ class TrackerParams:
     min_meas_var: float = 1e-4
 
     def __post_init__(self) -> None:
-        _integer("n_particles_total", self.n_particles_total, 1, 10_000_000)
-        _integer("min_particles_per_neighbour", self.min_particles_per_neighbour, 1)
-        _real("allocation_scale_m", self.allocation_scale_m, 0.0, None, lo_open=True)
-        if self.motion_model not in _MOTION_MODELS:
-            raise ValueError(
-                f"motion_model must be one of {_MOTION_MODELS}, got {self.motion_model!r}"
-            )
-        _real("k_p", self.k_p, 0.0, None, lo_open=False)
+        set_ = object.__setattr__
+        set_(
+            self,
+            "n_particles_total",
+            check_int("n_particles_total", self.n_particles_total, 1, 10_000_000),
+        )
+        set_(
+            self,
+            "min_particles_per_neighbour",
+            check_int(
+                "min_particles_per_neighbour", self.min_particles_per_neighbour, 1, 10_000_000
+            ),
+        )
+        set_(self, "motion_model", check_choice("motion_model", self.motion_model, _MOTION_MODELS))
+        set_(self, "init_mode", check_choice("init_mode", self.init_mode, _INIT_MODES))
+        set_(self, "ego_motion", check_choice("ego_motion", self.ego_motion, _EGO_MOTIONS))
+        set_(self, "clamp_to_arena", check_bool("clamp_to_arena", self.clamp_to_arena))
         if self.coverage_standoff_m is not None:
-            _real("coverage_standoff_m", self.coverage_standoff_m, 0.0, None, lo_open=False)
-        _real("process_noise_m_per_sqrt_s", self.process_noise_m_per_sqrt_s, 0.0, None, False)
-        _real("heading_noise_rad_per_sqrt_s", self.heading_noise_rad_per_sqrt_s, 0.0, None, False)
-        if self.init_mode not in _INIT_MODES:
-            raise ValueError(f"init_mode must be one of {_INIT_MODES}, got {self.init_mode!r}")
-        _real("init_spread_m", self.init_spread_m, 0.0, None, lo_open=False)
-        _real("init_heading_spread_rad", self.init_heading_spread_rad, 0.0, None, lo_open=False)
-        _real("mc_error_factor", self.mc_error_factor, 0.0, None, lo_open=False)
-        _real("confidence", self.confidence, 0.0, 1.0, lo_open=True, hi_open=True)
-        _real("recovery_min_ess", self.recovery_min_ess, 0.0, None, lo_open=False)
-        _real("recovery_gate_chi2", self.recovery_gate_chi2, 0.0, None, lo_open=True)
-        if self.ego_motion not in _EGO_MOTIONS:
-            raise ValueError(f"ego_motion must be one of {_EGO_MOTIONS}, got {self.ego_motion!r}")
-        if not isinstance(self.clamp_to_arena, bool):
-            raise ValueError(f"clamp_to_arena must be a bool, got {self.clamp_to_arena!r}")
-        _real("min_meas_var", self.min_meas_var, 0.0, None, lo_open=True)
+            set_(
+                self,
+                "coverage_standoff_m",
+                check_real(
+                    "coverage_standoff_m", self.coverage_standoff_m, 0.0, MAX_NOISE,
+                    note="(or None)",
+                ),
+            )  # fmt: skip
+        for name, (lo, hi, lo_open, hi_open) in _REAL_FIELDS.items():
+            value = check_real(name, getattr(self, name), lo, hi, lo_open=lo_open, hi_open=hi_open)
+            set_(self, name, value)
