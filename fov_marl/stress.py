@@ -1,0 +1,705 @@
+"""Adversarial stress sweeps of the safety filter: ``fov-marl stress``.
+
+A *case* is one adversary (:mod:`fov_marl.adversaries`) driving a team of N robots
+with camera amplitude β from one kind of start, behind
+:class:`~fov_marl.wrappers.SafetyFilterWrapper` or not, optionally with env/filter
+overrides (:class:`StressCase`). :func:`run_stress` runs ``episodes`` seeded
+episodes of ``steps`` steps per case and reports, per case:
+
+==========================  ====================================================================
+key                         meaning
+==========================  ====================================================================
+``collisions``              collision events (a pair entering contact, centres closer than
+                            ``2 robot_radius_m``; the env's ``metrics["collisions_total"]``),
+                            summed over episodes
+``collision_episodes``      episodes with at least one collision event
+``collision_seeds``         their seeds (rerun one with the same case and that seed)
+``violation_events``        D_s violation events (``metrics["safety_violations_total"]``)
+``violation_robot_steps``   robot-steps in which the robot is closer than D_s to some teammate
+                            (ground truth ``env.unwrapped.poses``, after each step)
+``min_distance_m``          smallest pairwise centre distance over all episodes (m),
+                            ``metrics["min_distance_episode"]``, the start included
+``robot_steps``             robot-steps run (Σ over steps of the live robots)
+``intervention_rate``       fraction of robot-steps with ``infos[a]["safety"]["intervened"]``
+``mean_action_change``      mean over robot-steps of ‖u − u*‖₂ in action units (the
+                            ``applied_action`` − ``nominal_action`` difference, a 3-vector
+                            of normalised ``[vx, vy, ω]``)
+``fallbacks``               robot-steps with ``infos[a]["safety"]["fallback"]``
+``statuses``                robot-steps per filter ``status`` string
+==========================  ====================================================================
+
+The three filter columns are ``None`` for unfiltered cases. Every number is a
+deterministic function of the case and the seed: episode k of every case uses seed
+``seed + k`` for the env and the filter (``env.reset(seed=seed + k)``), and child
+seeds of it (``SeedSequence([seed + k, 1])`` / ``[seed + k, 2]``) for the start poses
+and the adversary; ``workers > 1`` spreads the episodes over processes and gives
+the same rows as ``workers=1``.
+
+:func:`default_cases` gives the issue-10 acceptance grid (``full=True``) or a
+representative small subset (``full=False``); :func:`format_stress_table` prints
+rows; :func:`add_stress_parser` / :func:`cmd_stress` are the ``fov-marl stress``
+command (``python -m fov_marl.stress`` runs it standalone).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import os
+import sys
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fov_marl.adversaries import (
+    available_adversaries,
+    available_starts,
+    make_adversary,
+    make_start_poses,
+)
+
+__all__ = [
+    "StressCase",
+    "run_stress",
+    "run_stress_episode",
+    "default_cases",
+    "format_stress_table",
+    "add_stress_parser",
+    "cmd_stress",
+    "FULL_N_AGENTS",
+    "FULL_FOV_DEG",
+    "FULL_STARTS",
+    "STRESS_COLUMNS",
+]
+
+#: Team sizes, camera amplitudes (degrees) and starts of the acceptance grid (issue 10).
+FULL_N_AGENTS: tuple[int, ...] = (2, 4, 8, 12, 24)
+FULL_FOV_DEG: tuple[float, ...] = (45.0, 90.0, 120.0, 360.0)
+FULL_STARTS: tuple[str, ...] = ("random", "clustered", "corner", "wall")
+#: Adversaries also run from the ``head_on_pair`` start in the full grid.
+HEAD_ON_PAIR_ADVERSARIES: tuple[str, ...] = ("straight", "head_on")
+
+_SCENARIOS = ("coverage", "crossing")
+_START_STREAM, _POLICY_STREAM = 1, 2
+
+
+@dataclass(frozen=True)
+class StressCase:
+    """One cell of a stress sweep.
+
+    Attributes:
+        adversary: name from :func:`fov_marl.adversaries.available_adversaries`.
+        n_agents: team size N (>= 1).
+        fov_deg: camera amplitude β in degrees, (0, 360].
+        start: name from :func:`fov_marl.adversaries.available_starts`.
+        filtered: run behind :class:`~fov_marl.wrappers.SafetyFilterWrapper`.
+        scenario: ``"coverage"`` or ``"crossing"``.
+        env_kwargs: extra config fields for the env (not ``n_agents``, ``fov_deg``,
+            ``max_cycles``, ``initial_poses``, which the case sets).
+        filter_kwargs: keywords of ``SafetyFilterWrapper(env, **filter_kwargs)``
+            (e.g. ``{"controller_params": {...}}``).
+        adversary_kwargs: options of the adversary (``make_adversary(name, env, **kw)``).
+        start_kwargs: options of the start (``make_start_poses(start, cfg, rng, **kw)``).
+    """
+
+    adversary: str
+    n_agents: int
+    fov_deg: float
+    start: str = "random"
+    filtered: bool = True
+    scenario: str = "coverage"
+    env_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    filter_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    adversary_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    start_kwargs: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.adversary not in available_adversaries():
+            raise ValueError(
+                f"adversary must be one of {available_adversaries()}, got {self.adversary!r}"
+            )
+        if self.start not in available_starts():
+            raise ValueError(f"start must be one of {available_starts()}, got {self.start!r}")
+        if self.scenario not in _SCENARIOS:
+            raise ValueError(f"scenario must be one of {_SCENARIOS}, got {self.scenario!r}")
+        if not isinstance(self.filtered, bool | np.bool_):
+            raise ValueError(f"filtered must be a bool, got {self.filtered!r}")
+        if self.start == "head_on_pair" and self.n_agents < 2:
+            raise ValueError(f"start 'head_on_pair' needs n_agents >= 2, got {self.n_agents}")
+        fixed = {"n_agents", "fov_deg", "max_cycles", "initial_poses"} & set(self.env_kwargs)
+        if fixed:
+            raise ValueError(
+                f"env_kwargs must not set {sorted(fixed)}: the case's own fields and the "
+                "sweep's steps/start set them"
+            )
+        for name in ("env_kwargs", "filter_kwargs", "adversary_kwargs", "start_kwargs"):
+            if not isinstance(getattr(self, name), Mapping):
+                raise ValueError(f"{name} must be a mapping, got {getattr(self, name)!r}")
+        from fov_marl.config import make_config
+
+        # n_agents and fov_deg (and env_kwargs) validated by the scenario config
+        make_config(
+            scenario=self.scenario,
+            n_agents=self.n_agents,
+            fov_deg=self.fov_deg,
+            **dict(self.env_kwargs),
+        )
+
+    @classmethod
+    def coerce(cls, case: StressCase | Sequence[Any] | Mapping[str, Any]) -> StressCase:
+        """A :class:`StressCase` from itself, a tuple of its fields in order, or a dict."""
+        if isinstance(case, StressCase):
+            return case
+        if isinstance(case, Mapping):
+            return cls(**case)
+        if isinstance(case, Sequence) and not isinstance(case, str):
+            return cls(*case)
+        raise ValueError(f"a stress case must be a StressCase, tuple or dict, got {case!r}")
+
+    def describe(self) -> dict[str, Any]:
+        """JSON-friendly dict of the case's fields."""
+        d = asdict(self)
+        for k in ("env_kwargs", "filter_kwargs", "adversary_kwargs", "start_kwargs"):
+            d[k] = dict(d[k])
+        return d
+
+
+# ---------------------------------------------------------------- episodes
+def _make_env(case: StressCase, seed: int, steps: int) -> Any:
+    from fov_marl.config import make_config
+    from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
+
+    module = {"coverage": fov_coverage_v0, "crossing": fov_crossing_v0}[case.scenario]
+    kw = dict(case.env_kwargs, n_agents=case.n_agents, fov_deg=case.fov_deg, max_cycles=steps)
+    cfg = make_config(scenario=case.scenario, **kw)
+    start_rng = np.random.default_rng(np.random.SeedSequence([seed, _START_STREAM]))
+    poses = make_start_poses(case.start, cfg, start_rng, **dict(case.start_kwargs))
+    env = module.parallel_env(initial_poses=poses, **kw)
+    if case.filtered:
+        from fov_marl.wrappers import SafetyFilterWrapper
+
+        env = SafetyFilterWrapper(env, **dict(case.filter_kwargs))
+    return env
+
+
+def run_stress_episode(case: StressCase, seed: int, steps: int) -> dict[str, Any]:
+    """Run one seeded episode of ``case`` for at most ``steps`` steps and measure it.
+
+    Args:
+        case: the case (see :class:`StressCase`).
+        seed: seeds the env and the filter; start poses and adversary use child seeds.
+        steps: episode length (the env's ``max_cycles``); crossing may end earlier.
+
+    Returns:
+        ``{"seed", "steps", "robot_steps", "collisions", "first_collision_step",
+        "violation_events", "violation_robot_steps", "min_distance_m", "intervened",
+        "action_change_sum", "fallbacks", "statuses"}`` (the filter entries are None
+        when unfiltered; ``first_collision_step`` None when there was none).
+    """
+    case = StressCase.coerce(case)
+    env = _make_env(case, seed, steps)
+    base = env.unwrapped
+    adversary = make_adversary(case.adversary, env, **dict(case.adversary_kwargs))
+    obs, infos = env.reset(seed=seed)
+    adversary.reset(seed=int(np.random.SeedSequence([seed, _POLICY_STREAM]).generate_state(1)[0]))
+    d_s = base.config.safety_distance_m
+    metrics = next(iter(infos.values()))["metrics"]
+    n_steps = robot_steps = viol_rs = intervened = fallbacks = 0
+    du_sum = 0.0
+    first_collision = None
+    statuses: dict[str, int] = {}
+    while env.agents:
+        obs, _, _, _, infos = env.step(adversary.act(obs))
+        n_steps += 1
+        robot_steps += len(infos)
+        metrics = next(iter(infos.values()))["metrics"]
+        if first_collision is None and metrics["collisions_total"] > 0:
+            first_collision = n_steps
+        if base.config.n_agents > 1:
+            p = base.poses[:, :2]
+            d = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
+            np.fill_diagonal(d, np.inf)
+            live = np.array([base.agent_name_mapping[a] for a in infos], dtype=np.int64)
+            viol_rs += int(np.sum(d[live].min(axis=1) < d_s))
+        if case.filtered:
+            saf = [infos[a]["safety"] for a in infos]
+            intervened += sum(bool(s["intervened"]) for s in saf)
+            fallbacks += sum(bool(s["fallback"]) for s in saf)
+            du = np.array(
+                [
+                    np.asarray(s["applied_action"], np.float64)
+                    - np.asarray(s["nominal_action"], np.float64)
+                    for s in saf
+                ]
+            )
+            du_sum += float(np.linalg.norm(du, axis=1).sum())
+            for s in saf:
+                statuses[str(s["status"])] = statuses.get(str(s["status"]), 0) + 1
+    env.close()
+    return {
+        "seed": int(seed),
+        "steps": n_steps,
+        "robot_steps": robot_steps,
+        "collisions": int(metrics["collisions_total"]),
+        "first_collision_step": first_collision,
+        "violation_events": int(metrics["safety_violations_total"]),
+        "violation_robot_steps": viol_rs,
+        "min_distance_m": float(metrics["min_distance_episode"]),
+        "intervened": intervened if case.filtered else None,
+        "action_change_sum": du_sum if case.filtered else None,
+        "fallbacks": fallbacks if case.filtered else None,
+        "statuses": dict(sorted(statuses.items())) if case.filtered else None,
+    }
+
+
+def _job(job: tuple[int, StressCase, int, int]) -> tuple[int, dict[str, Any]]:
+    index, case, seed, steps = job
+    return index, run_stress_episode(case, seed, steps)
+
+
+def _aggregate(case: StressCase, eps: list[dict[str, Any]], steps: int) -> dict[str, Any]:
+    """One row from the episodes of one case (in seed order)."""
+    rs = sum(e["robot_steps"] for e in eps)
+    row: dict[str, Any] = {
+        "adversary": case.adversary,
+        "n_agents": case.n_agents,
+        "fov_deg": float(case.fov_deg),
+        "start": case.start,
+        "filtered": bool(case.filtered),
+        "scenario": case.scenario,
+        "episodes": len(eps),
+        "steps": steps,
+        "robot_steps": rs,
+        "collisions": sum(e["collisions"] for e in eps),
+        "collision_episodes": sum(e["collisions"] > 0 for e in eps),
+        "collision_seeds": [e["seed"] for e in eps if e["collisions"] > 0],
+        "violation_events": sum(e["violation_events"] for e in eps),
+        "violation_robot_steps": sum(e["violation_robot_steps"] for e in eps),
+        "min_distance_m": min(e["min_distance_m"] for e in eps),
+        "intervention_rate": None,
+        "mean_action_change": None,
+        "fallbacks": None,
+        "statuses": None,
+    }
+    if case.filtered:
+        row["intervention_rate"] = sum(e["intervened"] for e in eps) / max(rs, 1)
+        du = 0.0
+        for e in eps:  # fixed order: the same float sum for any number of workers
+            du += e["action_change_sum"]
+        row["mean_action_change"] = du / max(rs, 1)
+        row["fallbacks"] = sum(e["fallbacks"] for e in eps)
+        statuses: dict[str, int] = {}
+        for e in eps:
+            for k, v in e["statuses"].items():
+                statuses[k] = statuses.get(k, 0) + v
+        row["statuses"] = dict(sorted(statuses.items()))
+    overrides = {
+        k: v
+        for k, v in case.describe().items()
+        if k.endswith("_kwargs") and v  # keep the row small when there are none
+    }
+    row.update(overrides)
+    return row
+
+
+def run_stress(
+    cases: Iterable[StressCase | Sequence[Any] | Mapping[str, Any]],
+    episodes: int = 20,
+    steps: int = 300,
+    seed: int = 0,
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Run every case for ``episodes`` seeded episodes of ``steps`` steps.
+
+    Args:
+        cases: :class:`StressCase` objects, tuples of their fields in order
+            ``(adversary, n_agents, fov_deg, start, filtered, scenario, env_kwargs,
+            filter_kwargs, adversary_kwargs, start_kwargs)`` (trailing ones optional)
+            or dicts.
+        episodes: episodes per case (>= 1); episode k uses seed ``seed + k``.
+        steps: steps per episode (>= 1).
+        seed: first seed.
+        workers: processes (``concurrent.futures.ProcessPoolExecutor`` when > 1);
+            the rows do not depend on it.
+        progress: called as ``progress(done, total)`` after every episode.
+
+    Returns:
+        One dict per case, in the order given (keys in the module docstring, plus the
+        case's fields).
+
+    Raises:
+        ValueError: a bad case or argument (naming it).
+    """
+    cases = [StressCase.coerce(c) for c in cases]
+    for name, v in (("episodes", episodes), ("steps", steps), ("workers", workers)):
+        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+            raise ValueError(f"{name} must be a positive integer, got {v!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    jobs = [
+        (c_idx * episodes + k, case, int(seed) + k, int(steps))
+        for c_idx, case in enumerate(cases)
+        for k in range(episodes)
+    ]
+    results: list[dict[str, Any] | None] = [None] * len(jobs)
+    total = len(jobs)
+    if workers > 1 and total > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        # biggest teams first so the pool does not wait on one long tail job
+        order = sorted(jobs, key=lambda j: (-j[1].n_agents * (1 + 3 * j[1].filtered), j[0]))
+        with ProcessPoolExecutor(max_workers=min(workers, total)) as ex:
+            for done, (index, rec) in enumerate(ex.map(_job, order), start=1):
+                results[index] = rec
+                if progress is not None:
+                    progress(done, total)
+    else:
+        for done, job in enumerate(jobs, start=1):
+            index, rec = _job(job)
+            results[index] = rec
+            if progress is not None:
+                progress(done, total)
+    rows = []
+    for c_idx, case in enumerate(cases):
+        eps = results[c_idx * episodes : (c_idx + 1) * episodes]
+        rows.append(_aggregate(case, eps, int(steps)))  # type: ignore[arg-type]
+    return rows
+
+
+# ---------------------------------------------------------------- the grid
+def default_cases(full: bool = False, filtered: bool = True) -> list[StressCase]:
+    """The issue-10 acceptance grid or a representative subset of it.
+
+    Args:
+        full: ``True``: every adversary × N ∈ :data:`FULL_N_AGENTS` × β ∈
+            :data:`FULL_FOV_DEG` × start ∈ :data:`FULL_STARTS`, plus
+            :data:`HEAD_ON_PAIR_ADVERSARIES` × N × β from the ``head_on_pair`` start
+            (the simplest known failure). ``False``: 13 cases covering every adversary,
+            every N, every β and every start at least once.
+        filtered: behind :class:`~fov_marl.wrappers.SafetyFilterWrapper` or not.
+    """
+    if full:
+        grid = [
+            StressCase(a, n, b, s, filtered)
+            for a, n, b, s in itertools.product(
+                available_adversaries(), FULL_N_AGENTS, FULL_FOV_DEG, FULL_STARTS
+            )
+        ]
+        grid += [
+            StressCase(a, n, b, "head_on_pair", filtered)
+            for a, n, b in itertools.product(HEAD_ON_PAIR_ADVERSARIES, FULL_N_AGENTS, FULL_FOV_DEG)
+        ]
+        return grid
+    quick = [
+        ("straight", 2, 120.0, "head_on_pair"),
+        ("head_on", 2, 45.0, "head_on_pair"),
+        ("charge_centre", 4, 120.0, "clustered"),
+        ("spin_charge", 4, 45.0, "random"),
+        ("chase_last_seen", 8, 90.0, "clustered"),
+        ("wait_charge", 4, 360.0, "corner"),
+        ("head_on", 8, 120.0, "wall"),
+        ("rush", 12, 120.0, "random"),
+        ("random", 4, 90.0, "clustered"),
+        ("wall_slide", 4, 120.0, "wall"),
+        ("straight", 12, 45.0, "corner"),
+        ("charge_centre", 24, 120.0, "clustered"),
+        ("wait_charge", 8, 360.0, "random"),
+    ]
+    return [StressCase(a, n, b, s, filtered) for a, n, b, s in quick]
+
+
+# ------------------------------------------------------------------- table
+#: ``(header, row key)`` of :func:`format_stress_table`.
+STRESS_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("adversary", "adversary"),
+    ("N", "n_agents"),
+    ("fov", "fov_deg"),
+    ("start", "start"),
+    ("filter", "filtered"),
+    ("eps", "episodes"),
+    ("coll", "collisions"),
+    ("coll_eps", "collision_episodes"),
+    ("Ds_events", "violation_events"),
+    ("Ds_rsteps", "violation_robot_steps"),
+    ("min_d_m", "min_distance_m"),
+    ("interv", "intervention_rate"),
+    ("mean_du", "mean_action_change"),
+    ("fallback", "fallbacks"),
+)
+
+
+def format_stress_table(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Plain-text table of :func:`run_stress` rows (one line per case), then a summary line."""
+    from fov_marl.cli import format_table  # lazy: cli will import this module
+
+    def cell(key: str, v: Any) -> Any:
+        if key == "filtered":
+            return "yes" if v else "no"
+        if key == "fov_deg":
+            return f"{v:g}"
+        return v
+
+    body = [[cell(k, r.get(k)) for _, k in STRESS_COLUMNS] for r in rows]
+    table = format_table(body, [h for h, _ in STRESS_COLUMNS])
+    bad = sum(1 for r in rows if r.get("collisions", 0) > 0)
+    eps = sum(int(r.get("episodes", 0)) for r in rows)
+    return f"{table}\n\ncases with collisions: {bad} / {len(rows)} ({eps} episodes)"
+
+
+# --------------------------------------------------------------------- CLI
+def _csv(flag: str, conv: Callable[[str], Any], allowed: Sequence[Any] | None = None):
+    def parse(s: str) -> list[Any]:
+        items = [x.strip() for x in s.split(",") if x.strip()]
+        if not items:
+            raise argparse.ArgumentTypeError(f"{flag} needs a comma-separated list, got {s!r}")
+        out = []
+        for x in items:
+            try:
+                v = conv(x)
+            except ValueError:
+                raise argparse.ArgumentTypeError(
+                    f"{flag}: {x!r} is not a valid {conv.__name__}"
+                ) from None
+            if allowed is not None and v not in allowed:
+                raise argparse.ArgumentTypeError(
+                    f"{flag}: unknown value {x!r}; choose from {','.join(map(str, allowed))}"
+                )
+            out.append(v)
+        return out
+
+    return parse
+
+
+def _positive_int(flag: str):
+    def conv(s: str) -> int:
+        try:
+            v = int(s)
+        except ValueError:
+            v = 0
+        if v < 1:
+            raise argparse.ArgumentTypeError(f"{flag} must be a positive integer, got {s!r}")
+        return v
+
+    return conv
+
+
+def _non_negative_int(flag: str):
+    def conv(s: str) -> int:
+        try:
+            v = int(s)
+        except ValueError:
+            v = -1
+        if v < 0:
+            raise argparse.ArgumentTypeError(f"{flag} must be an integer >= 0, got {s!r}")
+        return v
+
+    return conv
+
+
+def _n_agents(s: str) -> int:
+    v = int(s)
+    if v < 1:
+        raise ValueError(s)
+    return v
+
+
+_n_agents.__name__ = "team size (integer >= 1)"
+
+
+def _fov(s: str) -> float:
+    v = float(s)
+    if not 0.0 < v <= 360.0:
+        raise ValueError(s)
+    return v
+
+
+_fov.__name__ = "FoV in (0, 360] degrees"
+
+
+def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add the ``stress`` command to an ``argparse`` subparsers object.
+
+    Sets ``func=cmd_stress`` on it, so ``args.func(args)`` runs the sweep.
+
+    Returns:
+        The ``stress`` subparser.
+    """
+    p = subparsers.add_parser(
+        "stress",
+        help="adversarial sweep of the safety filter: table of collisions, D_s, interventions",
+        description=(
+            "Run adversarial policies (fov_marl.adversaries) against SafetyFilterWrapper "
+            "and print, per case, collision events, D_s violations, the minimum distance, "
+            "the intervention rate and the mean action change. Without grid flags: the "
+            "quick subset (--quick). --full, or any of --adversaries/--n-agents/--fov-deg/"
+            "--starts without --quick: the product of the given lists, the full grid "
+            "filling the others. --quick with grid flags filters the quick subset."
+        ),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--quick", action="store_true", help="the representative subset")
+    mode.add_argument("--full", action="store_true", help="the full acceptance grid")
+    p.add_argument(
+        "--adversaries",
+        type=_csv("--adversaries", str, available_adversaries()),
+        default=None,
+        help=f"comma-separated, from {','.join(available_adversaries())}",
+    )
+    p.add_argument(
+        "--n-agents", type=_csv("--n-agents", _n_agents), default=None, help="e.g. 2,4,8"
+    )
+    p.add_argument(
+        "--fov-deg", type=_csv("--fov-deg", _fov), default=None, help="degrees, e.g. 45,120"
+    )
+    p.add_argument(
+        "--starts",
+        type=_csv("--starts", str, available_starts()),
+        default=None,
+        help=f"comma-separated, from {','.join(available_starts())}",
+    )
+    p.add_argument("--scenario", choices=_SCENARIOS, default="coverage")
+    p.add_argument(
+        "--episodes",
+        type=_positive_int("--episodes"),
+        default=None,
+        help="episodes per case (default: 20 with --full, else 3)",
+    )
+    p.add_argument(
+        "--steps", type=_positive_int("--steps"), default=300, help="steps per episode (dt 0.2 s)"
+    )
+    p.add_argument(
+        "--seed", type=_non_negative_int("--seed"), default=0, help="episode k uses seed + k"
+    )
+    p.add_argument("--workers", type=_positive_int("--workers"), default=1, help="processes")
+    p.add_argument("--no-filter", action="store_true", help="run the adversaries unfiltered")
+    p.add_argument("--json", default=None, metavar="OUT.json", help="also write the rows here")
+    p.add_argument(
+        "--fail-on-collision",
+        action="store_true",
+        help="exit status 1 when any case has a collision event",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=cmd_stress)
+    return p
+
+
+def _cases_from_args(args: argparse.Namespace) -> list[StressCase]:
+    filtered = not args.no_filter
+    dims = {
+        "adversary": args.adversaries,
+        "n_agents": args.n_agents,
+        "fov_deg": args.fov_deg,
+        "start": args.starts,
+    }
+    given = {k: v for k, v in dims.items() if v is not None}
+    if args.quick or (not args.full and not given):
+        cases = [
+            c
+            for c in default_cases(full=False, filtered=filtered)
+            if all(getattr(c, k) in v for k, v in given.items())
+        ]
+        if not cases:
+            raise ValueError(
+                "no case of the quick subset matches "
+                + ", ".join(f"--{k.replace('_', '-')}" for k in given)
+                + "; drop --quick to build the grid from the flags"
+            )
+    else:
+        full = {
+            "adversary": available_adversaries(),
+            "n_agents": list(FULL_N_AGENTS),
+            "fov_deg": list(FULL_FOV_DEG),
+            "start": list(FULL_STARTS),
+        }
+        full.update(given)
+        cases = [
+            StressCase(a, n, b, s, filtered, args.scenario)
+            for a, n, b, s in itertools.product(
+                full["adversary"], full["n_agents"], full["fov_deg"], full["start"]
+            )
+        ]
+        if args.full and "start" not in given:
+            heads = [a for a in HEAD_ON_PAIR_ADVERSARIES if a in full["adversary"]]
+            cases += [
+                StressCase(a, n, b, "head_on_pair", filtered, args.scenario)
+                for a, n, b in itertools.product(heads, full["n_agents"], full["fov_deg"])
+                if n >= 2
+            ]
+    if args.scenario != "coverage":
+        cases = [StressCase(**{**c.describe(), "scenario": args.scenario}) for c in cases]
+    return cases
+
+
+def cmd_stress(args: argparse.Namespace) -> int:
+    """Run the ``fov-marl stress`` command: print the table, optionally write JSON.
+
+    Returns:
+        0, or 1 with ``--fail-on-collision`` when some case collided.
+
+    Raises:
+        ValueError: a bad combination of flags (naming them) or an invalid case.
+    """
+    cases = _cases_from_args(args)
+    episodes = args.episodes if args.episodes is not None else (20 if args.full else 3)
+    t0 = time.perf_counter()
+
+    def progress(done: int, total: int) -> None:
+        if args.quiet:
+            return
+        bar = "#" * int(20 * done / total)
+        el = time.perf_counter() - t0
+        sys.stderr.write(f"\r[{bar:<20}] {done}/{total} episodes, {el:.1f} s")
+        if done == total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+    rows = run_stress(
+        cases,
+        episodes=episodes,
+        steps=args.steps,
+        seed=args.seed,
+        workers=args.workers,
+        progress=progress,
+    )
+    print(format_stress_table(rows))
+    if args.json:
+        path = Path(args.json)
+        if path.parent and not path.parent.exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+        settings = {k: v for k, v in vars(args).items() if k not in ("func",) and not callable(v)}
+        out = {
+            "settings": {**settings, "episodes": episodes},
+            "wall_s": time.perf_counter() - t0,
+            "rows": rows,
+        }
+        path.write_text(json.dumps(out, indent=2))
+        if not args.quiet:
+            print(f"\nwrote {path}")
+    collided = any(r["collisions"] > 0 for r in rows)
+    return 1 if (args.fail_on_collision and collided) else 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m fov_marl.stress [flags]``: the ``stress`` command on its own."""
+    parser = argparse.ArgumentParser(prog="fov_marl.stress")
+    sub = parser.add_subparsers(dest="command")
+    add_stress_parser(sub)
+    args = parser.parse_args(["stress", *(sys.argv[1:] if argv is None else argv)])
+    try:
+        return args.func(args)
+    except ValueError as exc:
+        if os.environ.get("FOV_MARL_DEBUG"):
+            raise
+        sys.stderr.write(f"fov_marl.stress: error: {exc}\n")
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,304 @@
+"""fov_marl.stress: the adversarial sweep runner, its grid, its table and the
+``stress`` command; the slow full sweep is issue 10's acceptance test of the filter."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+
+import numpy as np
+import pytest
+
+from fov_marl.adversaries import available_adversaries, available_starts
+from fov_marl.stress import (
+    FULL_FOV_DEG,
+    FULL_N_AGENTS,
+    FULL_STARTS,
+    StressCase,
+    add_stress_parser,
+    cmd_stress,
+    default_cases,
+    format_stress_table,
+    run_stress,
+    run_stress_episode,
+)
+
+TINY = [
+    StressCase("straight", 2, 120.0, "head_on_pair", filtered=False),
+    StressCase("head_on", 2, 45.0, "head_on_pair", filtered=True),
+    ("charge_centre", 3, 90.0, "clustered", True),
+    {"adversary": "random", "n_agents": 3, "fov_deg": 360.0, "start": "corner"},
+]
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="fov-marl")
+    sub = p.add_subparsers(dest="command", required=True)
+    add_stress_parser(sub)
+    return p
+
+
+def test_same_numbers_for_one_and_two_workers_and_reruns():
+    a = run_stress(TINY, episodes=2, steps=40, seed=3, workers=1)
+    b = run_stress(TINY, episodes=2, steps=40, seed=3, workers=2)
+    assert a == b
+    assert run_stress(TINY[1:2], episodes=2, steps=40, seed=3) == a[1:2]
+    c = run_stress(TINY, episodes=2, steps=40, seed=4, workers=1)
+    assert c != a
+
+
+def test_rows_report_what_the_episodes_did():
+    rows = run_stress(TINY, episodes=2, steps=40, seed=0)
+    assert [r["adversary"] for r in rows] == ["straight", "head_on", "charge_centre", "random"]
+    for r in rows:
+        assert r["episodes"] == 2 and r["steps"] == 40
+        assert r["robot_steps"] == 2 * 40 * r["n_agents"]
+        assert 0 <= r["violation_robot_steps"] <= r["robot_steps"]
+        assert r["collision_episodes"] == len(r["collision_seeds"]) <= 2
+        assert (r["collisions"] > 0) == (r["collision_episodes"] > 0)
+        assert r["min_distance_m"] >= 0
+        if r["filtered"]:
+            assert 0.0 <= r["intervention_rate"] <= 1.0
+            assert r["mean_action_change"] >= 0.0
+            assert r["fallbacks"] >= 0
+            assert sum(r["statuses"].values()) == r["robot_steps"]
+        else:
+            assert r["intervention_rate"] is None and r["mean_action_change"] is None
+            assert r["fallbacks"] is None and r["statuses"] is None
+    json.dumps(rows)  # JSON-friendly
+    # the unfiltered head-on pair collides in both episodes, closer than contact
+    straight = rows[0]
+    assert straight["collisions"] >= 2 and straight["collision_seeds"] == [0, 1]
+    assert straight["min_distance_m"] < 1.0 and straight["violation_events"] >= 2
+
+
+def test_episode_matches_the_env_metrics_and_the_safety_infos():
+    """Recompute one filtered episode by hand from the env's and the filter's infos."""
+    from fov_marl.adversaries import make_adversary, make_start_poses
+    from fov_marl.envs import fov_coverage_v0
+    from fov_marl.wrappers import SafetyFilterWrapper
+
+    case = StressCase("charge_centre", 3, 90.0, "clustered", True)
+    rec = run_stress_episode(case, seed=7, steps=30)
+    cfg = fov_coverage_v0.parallel_env(n_agents=3, fov_deg=90.0, max_cycles=30).config
+    poses = make_start_poses(
+        "clustered", cfg, np.random.default_rng(np.random.SeedSequence([7, 1]))
+    )
+    env = SafetyFilterWrapper(
+        fov_coverage_v0.parallel_env(n_agents=3, fov_deg=90.0, max_cycles=30, initial_poses=poses)
+    )
+    adv = make_adversary("charge_centre", env)
+    obs, _ = env.reset(seed=7)
+    adv.reset(seed=0)  # charge_centre draws nothing: the policy seed does not matter
+    interv = viol = 0
+    du = []
+    while env.agents:
+        obs, _, _, _, infos = env.step(adv.act(obs))
+        interv += sum(i["safety"]["intervened"] for i in infos.values())
+        du += [
+            np.linalg.norm(
+                i["safety"]["applied_action"].astype(float) - i["safety"]["nominal_action"]
+            )
+            for i in infos.values()
+        ]
+        p = env.unwrapped.poses[:, :2]
+        d = np.linalg.norm(p[:, None] - p[None], axis=-1)
+        np.fill_diagonal(d, np.inf)
+        viol += int(np.sum(d.min(1) < cfg.safety_distance_m))
+    m = infos["robot_0"]["metrics"]
+    assert rec["collisions"] == m["collisions_total"]
+    assert rec["violation_events"] == m["safety_violations_total"]
+    assert rec["min_distance_m"] == m["min_distance_episode"]
+    assert rec["intervened"] == interv and rec["violation_robot_steps"] == viol
+    assert rec["action_change_sum"] == pytest.approx(sum(du))
+    assert rec["robot_steps"] == 90
+
+
+def test_cases_validate_and_name_the_field():
+    with pytest.raises(ValueError, match="adversary"):
+        StressCase("nope", 2, 120.0)
+    with pytest.raises(ValueError, match="start"):
+        StressCase("straight", 2, 120.0, "nowhere")
+    with pytest.raises(ValueError, match="fov_deg"):
+        StressCase("straight", 2, 400.0)
+    with pytest.raises(ValueError, match="n_agents"):
+        StressCase("straight", 0, 120.0)
+    with pytest.raises(ValueError, match="head_on_pair"):
+        StressCase("straight", 1, 120.0, "head_on_pair")
+    with pytest.raises(ValueError, match="max_cycles"):
+        StressCase("straight", 2, 120.0, env_kwargs={"max_cycles": 5})
+    with pytest.raises(ValueError, match="arena_size_m"):
+        StressCase("straight", 2, 120.0, env_kwargs={"arena_size_m": -1.0})
+    with pytest.raises(ValueError, match="episodes"):
+        run_stress(TINY[:1], episodes=0)
+    with pytest.raises(ValueError, match="workers"):
+        run_stress(TINY[:1], workers=0)
+    with pytest.raises(ValueError, match="stress case"):
+        run_stress([42])
+
+
+def test_overrides_reach_the_env_the_filter_and_the_adversary():
+    base = StressCase("wait_charge", 2, 120.0, "head_on_pair", False)
+    still = StressCase(
+        "wait_charge",
+        2,
+        120.0,
+        "head_on_pair",
+        False,
+        env_kwargs={"safety_distance_m": 3.0},
+        adversary_kwargs={"wait_steps": 1000},
+    )
+    a, b = run_stress([base, still], episodes=1, steps=30)
+    assert a["collisions"] > 0
+    # standing still 2.6 m apart: no collision, but inside the 3 m D_s all the time
+    assert b["collisions"] == 0 and b["violation_robot_steps"] == 2 * 30
+    assert b["adversary_kwargs"] == {"wait_steps": 1000}
+    f = StressCase(
+        "straight",
+        2,
+        120.0,
+        "head_on_pair",
+        True,
+        filter_kwargs={"controller_params": {"safety_speed_margin_mps": 0.0}},
+    )
+    (r,) = run_stress([f], episodes=1, steps=10)
+    assert r["filter_kwargs"] == {"controller_params": {"safety_speed_margin_mps": 0.0}}
+
+
+def test_default_cases_cover_the_acceptance_grid():
+    full = default_cases(full=True)
+    keys = {(c.adversary, c.n_agents, c.fov_deg, c.start) for c in full}
+    assert len(keys) == len(full) and all(c.filtered for c in full)
+    for a in available_adversaries():
+        for n in (2, 4, 8, 12, 24):
+            for b in (45.0, 90.0, 120.0, 360.0):
+                for s in ("random", "clustered", "corner", "wall"):
+                    assert (a, n, b, s) in keys
+    assert {c.start for c in full} == set(FULL_STARTS) | {"head_on_pair"}
+    quick = default_cases(full=False)
+    assert len(quick) <= 16 and {c.adversary for c in quick} == set(available_adversaries())
+    assert {c.n_agents for c in quick} == set(FULL_N_AGENTS)
+    assert {c.fov_deg for c in quick} == set(FULL_FOV_DEG)
+    assert {c.start for c in quick} == set(available_starts())
+    assert not any(c.filtered for c in default_cases(full=False, filtered=False))
+
+
+def test_format_stress_table():
+    rows = run_stress(TINY[:2], episodes=1, steps=20)
+    text = format_stress_table(rows)
+    lines = text.splitlines()
+    assert lines[0].split()[:5] == ["adversary", "N", "fov", "start", "filter"]
+    assert "interv" in lines[0] and "min_d_m" in lines[0] and "Ds_events" in lines[0]
+    assert lines[2].split()[:5] == ["straight", "2", "120", "head_on_pair", "no"]
+    assert lines[3].split()[:5] == ["head_on", "2", "45", "head_on_pair", "yes"]
+    assert lines[-1].startswith("cases with collisions: 1 / 2")
+
+
+def test_cmd_stress_prints_a_table_and_writes_json(tmp_path, capsys):
+    out = tmp_path / "sub" / "stress.json"
+    args = _parser().parse_args(
+        [
+            "stress",
+            "--adversaries",
+            "straight,head_on",
+            "--n-agents",
+            "2",
+            "--fov-deg",
+            "120",
+            "--starts",
+            "head_on_pair",
+            "--episodes",
+            "1",
+            "--steps",
+            "15",
+            "--json",
+            str(out),
+            "--quiet",
+        ]
+    )
+    assert args.func is cmd_stress
+    assert cmd_stress(args) == 0
+    text = capsys.readouterr().out
+    assert "adversary" in text and "straight" in text and "head_on" in text
+    assert "cases with collisions:" in text
+    data = json.loads(out.read_text())
+    assert [r["adversary"] for r in data["rows"]] == ["straight", "head_on"]
+    assert data["settings"]["episodes"] == 1 and data["settings"]["steps"] == 15
+
+
+def test_cmd_stress_unfiltered_fail_on_collision(capsys):
+    args = _parser().parse_args(
+        "stress --adversaries straight --n-agents 2 --starts head_on_pair --fov-deg 90 "
+        "--episodes 1 --steps 15 --no-filter --fail-on-collision --quiet".split()
+    )
+    assert cmd_stress(args) == 1
+    assert " no " in capsys.readouterr().out
+
+
+def test_cmd_stress_quick_filters_the_subset(capsys, monkeypatch):
+    import fov_marl.stress as stress
+
+    seen = {}
+
+    def fake_run(cases, **kw):
+        seen["cases"], seen["kw"] = cases, kw
+        return []
+
+    monkeypatch.setattr(stress, "run_stress", fake_run)
+    assert cmd_stress(_parser().parse_args(["stress"])) == 0
+    assert seen["cases"] == default_cases(full=False)
+    assert seen["kw"]["episodes"] == 3 and seen["kw"]["steps"] == 300
+    cmd_stress(_parser().parse_args("stress --quick --adversaries head_on".split()))
+    assert {c.adversary for c in seen["cases"]} == {"head_on"} and len(seen["cases"]) == 2
+    cmd_stress(_parser().parse_args("stress --full --no-filter".split()))
+    assert seen["kw"]["episodes"] == 20 and len(seen["cases"]) == len(default_cases(full=True))
+    assert not any(c.filtered for c in seen["cases"])
+    cmd_stress(_parser().parse_args("stress --n-agents 6 --fov-deg 100".split()))
+    assert {(c.n_agents, c.fov_deg) for c in seen["cases"]} == {(6, 100.0)}
+    assert len(seen["cases"]) == len(available_adversaries()) * len(FULL_STARTS)
+    cmd_stress(_parser().parse_args("stress --scenario crossing --quick".split()))
+    assert {c.scenario for c in seen["cases"]} == {"crossing"}
+    with pytest.raises(ValueError, match="--quick"):
+        cmd_stress(_parser().parse_args("stress --quick --n-agents 3".split()))
+
+
+@pytest.mark.parametrize(
+    "argv,flag",
+    [
+        ("--adversaries straight,nope", "--adversaries"),
+        ("--n-agents 2,x", "--n-agents"),
+        ("--n-agents 0", "--n-agents"),
+        ("--fov-deg 0", "--fov-deg"),
+        ("--fov-deg 361", "--fov-deg"),
+        ("--starts moon", "--starts"),
+        ("--episodes 0", "--episodes"),
+        ("--steps -3", "--steps"),
+        ("--workers two", "--workers"),
+        ("--seed -1", "--seed"),
+        ("--quick --full", "--full"),
+    ],
+)
+def test_bad_flags_name_the_flag(argv, flag, capsys):
+    with pytest.raises(SystemExit) as exc:
+        _parser().parse_args(["stress", *argv.split()])
+    assert exc.value.code == 2
+    assert flag in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_filter_quick_sweep_no_collisions():
+    """The CI-sized subset of issue 10's acceptance sweep (3 episodes × 300 steps)."""
+    rows = run_stress(default_cases(full=False), episodes=3, steps=300, workers=os.cpu_count() or 1)
+    bad = [r for r in rows if r["collisions"]]
+    assert not bad, "\n" + format_stress_table(bad)
+
+
+@pytest.mark.slow
+def test_filter_full_sweep_no_collisions():
+    """Issue 10 acceptance: SafetyFilterWrapper with the shipped adversaries, N ∈ {2, 4, 8,
+    12, 24}, β ∈ {45, 90, 120, 360}, random/clustered/corner/wall (+ head-on pair) starts,
+    20 episodes × 300 steps per case: 0 collision events in every case."""
+    rows = run_stress(default_cases(full=True), episodes=20, steps=300, workers=os.cpu_count() or 1)
+    bad = [r for r in rows if r["collisions"]]
+    assert not bad, f"\n{len(bad)} / {len(rows)} cases collide\n" + format_stress_table(bad)
