@@ -3,6 +3,7 @@
 Use them to stress your own safety layer (or policy) the way the project stresses
 :class:`fov_marl.wrappers.SafetyFilterWrapper`::
 
+    import numpy as np
     from fov_marl.adversaries import make_adversary, make_start_poses
     from fov_marl.envs import fov_coverage_v0
     from fov_marl.wrappers import SafetyFilterWrapper

@@ -453,22 +453,22 @@ def format_stress_table(rows: Sequence[Mapping[str, Any]]) -> str:
 
 
 # --------------------------------------------------------------------- CLI
-def _csv(flag: str, conv: Callable[[str], Any], allowed: Sequence[Any] | None = None):
+def _csv(conv: Callable[[str], Any], allowed: Sequence[Any] | None = None):
+    """argparse type: a comma-separated list of ``conv`` values (argparse names the flag)."""
+
     def parse(s: str) -> list[Any]:
         items = [x.strip() for x in s.split(",") if x.strip()]
         if not items:
-            raise argparse.ArgumentTypeError(f"{flag} needs a comma-separated list, got {s!r}")
+            raise argparse.ArgumentTypeError(f"needs a comma-separated list, got {s!r}")
         out = []
         for x in items:
             try:
                 v = conv(x)
             except ValueError:
-                raise argparse.ArgumentTypeError(
-                    f"{flag}: {x!r} is not a valid {conv.__name__}"
-                ) from None
+                raise argparse.ArgumentTypeError(f"{x!r} is not a valid {conv.__name__}") from None
             if allowed is not None and v not in allowed:
                 raise argparse.ArgumentTypeError(
-                    f"{flag}: unknown value {x!r}; choose from {','.join(map(str, allowed))}"
+                    f"unknown value {x!r}; choose from {','.join(map(str, allowed))}"
                 )
             out.append(v)
         return out
@@ -548,19 +548,15 @@ def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
     mode.add_argument("--full", action="store_true", help="the full acceptance grid")
     p.add_argument(
         "--adversaries",
-        type=_csv("--adversaries", str, available_adversaries()),
+        type=_csv(str, available_adversaries()),
         default=None,
         help=f"comma-separated, from {','.join(available_adversaries())}",
     )
-    p.add_argument(
-        "--n-agents", type=_csv("--n-agents", _n_agents), default=None, help="e.g. 2,4,8"
-    )
-    p.add_argument(
-        "--fov-deg", type=_csv("--fov-deg", _fov), default=None, help="degrees, e.g. 45,120"
-    )
+    p.add_argument("--n-agents", type=_csv(_n_agents), default=None, help="e.g. 2,4,8")
+    p.add_argument("--fov-deg", type=_csv(_fov), default=None, help="degrees, e.g. 45,120")
     p.add_argument(
         "--starts",
-        type=_csv("--starts", str, available_starts()),
+        type=_csv(str, available_starts()),
         default=None,
         help=f"comma-separated, from {','.join(available_starts())}",
     )
