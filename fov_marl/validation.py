@@ -141,7 +141,7 @@ def check_real(
         raise ConfigError(f"{name} must be in {allowed}, got {describe(value)}")
     if hi is not None and (v > hi or (hi_open and v == hi)):
         raise ConfigError(f"{name} must be in {allowed}, got {describe(value)}")
-    return v
+    return v + 0.0  # -0.0 -> 0.0 (NumPy's uniform(0.0, -0.0) is an error)
 
 
 def check_int(name: str, value: Any, lo: int, hi: int | None = None, *, note: str = "") -> int:
@@ -307,15 +307,21 @@ def check_seed(name: str, value: Any) -> int | None:
     return check_int(name, value, 0, note="(or None)")
 
 
-def check_budget(name: str, need: float, limit: float, what: str, unit: str = "") -> None:
-    """Resource guard: ``need`` (what ``name`` would cost) must not exceed ``limit``.
+def check_budget(
+    name: str, value: Any, need: float, limit: float, what: str, unit: str, context: str = ""
+) -> None:
+    """Resource guard: ``need`` (what ``name = value`` would cost) must not exceed ``limit``.
 
-    The message names the field, what it costs and the stated limit, e.g.
-    ``eta_grid_m = 1e-05 needs 4000000 grid cells per axis; the limit is 20000``.
+    The message names the field, its value, what it costs and the stated limit, e.g.
+    ``eta_grid_m = 1e-05 (arena_size_m = 40.0): the eta quadrature grid would need
+    4e+06 cells per axis, more than the limit of 20000``.
     """
     if not need <= limit:  # also catches NaN
-        u = f" {unit}" if unit else ""
-        raise ConfigError(f"{name}: {what} would need {need:.6g}{u}; the limit is {limit:g}{u}")
+        ctx = f" ({context})" if context else ""
+        raise ConfigError(
+            f"{name} = {describe(value)}{ctx}: {what} would need {need:.6g} {unit}, more than "
+            f"the limit of {limit:g}"
+        )
 
 
 def as_real_vector(name: str, value: Any, n: int) -> np.ndarray | str:
