@@ -1,13 +1,23 @@
 """The ``fov-marl`` command line: evaluate, reproduce, render, bench, train.
 
 Run ``fov-marl COMMAND --help`` for each command's options, defaults and units.
-Bad arguments print one line naming the flag and exit with status 2.
+
+Errors. A user mistake (a bad flag value, an unreadable or foreign model file, an
+output path that cannot be written) prints one line on stderr naming the flag or file
+and what is wrong, and exits with status 2, before any work starts where it can be
+checked up front (``--out`` paths, ``--policy`` files, the scenario config,
+``train --hp``). Unexpected internal errors (an exception other than ``ValueError``
+or ``OSError``, or one raised inside a third-party library rather than by
+fov_marl's own checks) still show their traceback, so real bugs are not hidden;
+``--debug`` (anywhere on the command line, or ``FOV_MARL_DEBUG=1``) shows the
+traceback for user mistakes too. Ctrl-C exits with status 130 without a traceback.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -15,43 +25,65 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["main", "build_parser", "format_table"]
+from fov_marl.validation import check_out_dir, check_out_file
+
+__all__ = ["main", "build_parser", "format_table", "CliError"]
+
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
+
+#: --seed range: every consumer (NumPy, stable-baselines3's np.random.seed) takes it
+MAX_SEED = 2**31 - 1
+#: render keeps its frames in memory (640 x 640 x 3 bytes each): at most this many
+MAX_RENDER_FRAMES = 1000
 
 
 class _Parser(argparse.ArgumentParser):
     """argparse, but errors are one line (no usage dump) and exit 2."""
 
     def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        self.exit(2, f"{self.prog}: error: {_one_line(message)}\n")
 
 
 class CliError(ValueError):
     """A bad argument value detected after parsing; names the flag."""
 
 
-def _positive_int(flag: str):
+def _one_line(text: Any) -> str:
+    return " ".join(str(text).split()) or "(no message)"
+
+
+def _int_in(flag: str, lo: int, hi: int | None = None):
+    """argparse type: an integer (decimal digits) in ``[lo, hi]``."""
+    allowed = f"an integer in [{lo}, {hi}]" if hi is not None else f"an integer >= {lo}"
+
     def conv(s: str) -> int:
         try:
-            v = int(s)
+            v = int(s.strip())
         except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"{flag} must be a positive integer, got {s!r}"
-            ) from None
-        if v < 1:
-            raise argparse.ArgumentTypeError(f"{flag} must be a positive integer, got {s!r}")
+            raise argparse.ArgumentTypeError(f"{flag} must be {allowed}, got {s!r}") from None
+        if v < lo or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(f"{flag} must be {allowed}, got {s!r}")
         return v
 
     return conv
 
 
+def _positive_int(flag: str, hi: int | None = None):
+    return _int_in(flag, 1, hi)
+
+
 def _float_in(flag: str, lo: float, hi: float, lo_open: bool = False):
+    """argparse type: a finite real in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``)."""
+    b = "(" if lo_open else "["
+
     def conv(s: str) -> float:
         try:
             v = float(s)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag} must be a number, got {s!r}") from None
-        if not (lo < v if lo_open else lo <= v) or v > hi:
-            b = "(" if lo_open else "["
+            raise argparse.ArgumentTypeError(
+                f"{flag} must be a number in {b}{lo}, {hi}], got {s!r}"
+            ) from None
+        if not math.isfinite(v) or not (lo < v if lo_open else lo <= v) or v > hi:
             raise argparse.ArgumentTypeError(f"{flag} must be in {b}{lo}, {hi}], got {s!r}")
         return v
 
@@ -89,6 +121,9 @@ EVAL_COLUMNS = (
     "cpu_ms_per_robot_step",
 )
 
+#: CLI flags that set scenario config fields
+_CONFIG_FLAGS = {"n_agents": "--n-agents", "fov_deg": "--fov-deg", "max_cycles": "--max-cycles"}
+
 
 def _is_model(policy: str) -> bool:
     return policy.endswith(".zip") or os.path.isdir(policy)
@@ -97,11 +132,72 @@ def _is_model(policy: str) -> bool:
 def _env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     """Config keywords given on the command line; scenario/model defaults fill the rest."""
     kw: dict[str, Any] = {}
-    for flag in ("n_agents", "fov_deg", "max_cycles"):
+    for flag in _CONFIG_FLAGS:
         if getattr(args, flag, None) is not None:
             kw[flag] = getattr(args, flag)
     if not _is_model(args.policy):
         kw.setdefault("fov_deg", 120.0)
+    return kw
+
+
+def _check_policy(args: argparse.Namespace, *, models: bool = True) -> Any | None:
+    """``--policy``: a registered name (returns None) or a trained model (returns it
+    loaded), checked before any episode runs."""
+    policy = args.policy
+    if _is_model(policy):
+        if not models:
+            raise CliError(
+                f"--policy {policy}: {args.command} takes a registered policy name; "
+                "trained models are not supported by this command"
+            )
+        try:
+            from fov_marl.training import load_policy  # torch only for learned policies
+        except ImportError as exc:
+            raise CliError(
+                f"--policy {policy}: loading a trained model needs the 'train' extra "
+                f"(pip install fov_marl[train]): {exc}"
+            ) from None
+        try:
+            loaded = load_policy(policy)
+        except ValueError as exc:
+            raise CliError(f"--policy {_one_line(exc)}") from None
+        n = getattr(args, "n_agents", None)
+        if n is not None and n != loaded.n_agents:
+            raise CliError(
+                f"--n-agents {n}: the model {policy} was trained with n_agents = "
+                f"{loaded.n_agents} (its observation size depends on it)"
+            )
+        return loaded
+    from fov_marl.baselines import available_policies
+
+    names = available_policies()
+    if policy not in names:
+        raise CliError(
+            f"--policy must be a registered policy {names} or the path of a trained "
+            f"model.zip, got {policy!r}"
+        )
+    return None
+
+
+def _check_config(args: argparse.Namespace, loaded: Any | None) -> dict[str, Any]:
+    """Validate the scenario config the flags (and a model's config.json) give."""
+    from fov_marl.config import ConfigError, make_config
+
+    kw = _env_kwargs(args)
+    base = dict(loaded.env_kwargs) if loaded is not None else {}
+    try:
+        make_config(scenario=args.scenario, **{**base, **kw})
+    except ConfigError as exc:
+        given = [
+            f"{flag} {getattr(args, f)}"
+            for f, flag in _CONFIG_FLAGS.items()
+            if getattr(args, f, None) is not None
+        ]
+        if given:
+            raise CliError(f"{' '.join(given)}: {_one_line(exc)}") from None
+        if loaded is not None:
+            raise CliError(f"--policy {args.policy}: its config.json: {_one_line(exc)}") from None
+        raise CliError(_one_line(exc)) from None
     return kw
 
 
@@ -125,11 +221,10 @@ def _episode_job(job: dict[str, Any]) -> dict[str, Any]:
 def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     from fov_marl.evaluation import EpisodeRecord, summarize
 
-    env_kwargs = _env_kwargs(args)
-    # validate the config once, here, so a bad value is one clear line
-    from fov_marl.config import make_config
-
-    make_config(scenario=args.scenario, **env_kwargs)
+    # every check before the first episode: output folder, policy, config
+    out_dir = check_out_dir("--out", args.out) if args.out is not None else None
+    loaded = _check_policy(args)
+    env_kwargs = _check_config(args, loaded)
     jobs = [
         dict(
             scenario=args.scenario,
@@ -181,12 +276,11 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
             srows.append([f, s["mean"], s["std"], s["ci95"][0], s["ci95"][1], s["n"]])
     print()
     print(format_table(srows, ("metric", "mean", "std", "ci95_lo", "ci95_hi", "n")))
-    if args.out:
-        path = Path(args.out)
-        path.mkdir(parents=True, exist_ok=True)
-        (path / "results.json").write_text(json.dumps(out, indent=2))
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / "results.json").write_text(json.dumps(out, indent=2))
         if not args.quiet:
-            print(f"\nwrote {path / 'results.json'}")
+            print(f"\nwrote {out_dir / 'results.json'}")
     return out
 
 
@@ -202,15 +296,29 @@ def _progress(k: int, n: int, t0: float, quiet: bool) -> None:
 
 
 # ------------------------------------------------------------------- render
+RENDER_SUFFIXES = (".gif", ".mp4", ".png")
+
+
 def run_render(args: argparse.Namespace) -> Path:
+    from fov_marl.config import make_config
     from fov_marl.video import render_episode
 
-    env_kwargs = _env_kwargs(args)
+    out = check_out_file("--out", args.out, RENDER_SUFFIXES)
+    _check_policy(args, models=False)
+    env_kwargs = _check_config(args, None)
+    steps = make_config(scenario=args.scenario, **env_kwargs).max_cycles
+    frames = -(-steps // args.every)
+    if out.suffix.lower() != ".png" and frames > MAX_RENDER_FRAMES:
+        raise CliError(
+            f"--every {args.every}: an episode of {steps} steps keeps {frames} frames in "
+            f"memory (640 x 640 RGB each); at most {MAX_RENDER_FRAMES}: raise --every to "
+            f"{-(-steps // MAX_RENDER_FRAMES)} or lower --max-cycles"
+        )
     path = render_episode(
         scenario=args.scenario,
         policy=args.policy,
         seed=args.seed,
-        out=Path(args.out),
+        out=out,
         safety_filter=args.safety_filter,
         every=args.every,
         fps=args.fps,
@@ -221,6 +329,9 @@ def run_render(args: argparse.Namespace) -> Path:
 
 
 # -------------------------------------------------------------------- bench
+BENCH_MAX_AGENTS = 100
+
+
 def run_bench(args: argparse.Namespace) -> list[dict[str, Any]]:
     from fov_marl.bench import run_benchmarks
 
@@ -240,7 +351,8 @@ def run_bench(args: argparse.Namespace) -> list[dict[str, Any]]:
 def run_reproduce(args: argparse.Namespace) -> Path:
     from fov_marl.report import reproduce
 
-    path = reproduce(Path(args.out), quick=args.quick, workers=args.workers, seeds=args.seeds)
+    out = check_out_dir("--out", args.out)
+    path = reproduce(out, quick=args.quick, workers=args.workers, seeds=args.seeds)
     print(f"wrote {path}")
     return path
 
@@ -249,6 +361,16 @@ def run_reproduce(args: argparse.Namespace) -> Path:
 def build_parser() -> argparse.ArgumentParser:
     fmt = argparse.ArgumentDefaultsHelpFormatter
     p = _Parser(prog="fov-marl", description=__doc__, formatter_class=fmt)
+    p.add_argument(
+        "--debug",
+        action="store_true",
+        help="show the traceback of every error, user mistakes included",
+    )
+    # --debug is accepted after the command too (default SUPPRESS keeps the top one)
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks"
+    )
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     def scenario_args(sp: argparse.ArgumentParser, policy_default: str = "pfcbf") -> None:
@@ -260,9 +382,10 @@ def build_parser() -> argparse.ArgumentParser:
         )
         sp.add_argument(
             "--n-agents",
-            type=_positive_int("--n-agents"),
+            type=_int_in("--n-agents", 1, 256),
             default=None,
-            help="robots N (default: 6 for coverage, 4 for crossing, or a model's training config)",
+            help="robots N in [1, 256] (default: 6 for coverage, 4 for crossing, or a model's "
+            "training config)",
         )
         sp.add_argument(
             "--fov-deg",
@@ -270,7 +393,12 @@ def build_parser() -> argparse.ArgumentParser:
             default=None,
             help="camera FoV amplitude beta in degrees, (0, 360] (default: 120, or a model's training config)",
         )
-        sp.add_argument("--seed", type=int, default=0, help="first seed; episode k uses seed + k")
+        sp.add_argument(
+            "--seed",
+            type=_int_in("--seed", 0, MAX_SEED),
+            default=0,
+            help=f"first seed in [0, {MAX_SEED}]; episode k uses seed + k",
+        )
         sp.add_argument(
             "--safety-filter",
             action="store_true",
@@ -287,11 +415,12 @@ def build_parser() -> argparse.ArgumentParser:
         "evaluate",
         help="run seeded episodes, print a table, write results.json",
         formatter_class=fmt,
+        parents=[common],
     )
     scenario_args(e)
-    e.add_argument("--episodes", type=_positive_int("--episodes"), default=5)
+    e.add_argument("--episodes", type=_positive_int("--episodes", 10**6), default=5)
     e.add_argument(
-        "--workers", type=_positive_int("--workers"), default=1, help="parallel processes"
+        "--workers", type=_positive_int("--workers", 256), default=1, help="parallel processes"
     )
     e.add_argument("--out", default=None, help="directory for results.json")
     e.add_argument(
@@ -304,46 +433,69 @@ def build_parser() -> argparse.ArgumentParser:
         "reproduce",
         help="the paper's Section VII experiments: report.md + figures",
         formatter_class=fmt,
+        parents=[common],
     )
     r.add_argument("--out", default="report", help="output directory")
     r.add_argument("--quick", action="store_true", help="reduced version (a few minutes)")
-    r.add_argument("--workers", type=_positive_int("--workers"), default=os.cpu_count() or 1)
+    r.add_argument(
+        "--workers",
+        type=_positive_int("--workers", 256),
+        default=min(os.cpu_count() or 1, 256),
+        help="parallel processes, in [1, 256]",
+    )
     r.add_argument(
         "--seeds",
-        type=_positive_int("--seeds"),
+        type=_positive_int("--seeds", 1000),
         default=None,
-        help="random starts per experiment (default 5; 2 with --quick)",
+        help="random starts per experiment, in [1, 1000] (default 5; 2 with --quick)",
     )
     r.set_defaults(func=run_reproduce)
 
-    d = sub.add_parser("render", help="render one episode to .gif/.mp4/.png", formatter_class=fmt)
+    d = sub.add_parser(
+        "render",
+        help="render one episode to .gif/.mp4/.png",
+        formatter_class=fmt,
+        parents=[common],
+    )
     scenario_args(d)
     d.add_argument(
         "--out", default="episode.gif", help="output file (.gif, .mp4 or .png for the last frame)"
     )
     d.add_argument(
-        "--every", type=_positive_int("--every"), default=5, help="keep every k-th frame"
+        "--every",
+        type=_positive_int("--every"),
+        default=5,
+        help=f"keep every k-th frame (at most {MAX_RENDER_FRAMES} frames are kept in memory)",
     )
-    d.add_argument("--fps", type=_positive_int("--fps"), default=10)
+    d.add_argument(
+        "--fps", type=_positive_int("--fps", 100), default=10, help="frames per second, [1, 100]"
+    )
     d.set_defaults(func=run_render)
 
     b = sub.add_parser(
         "bench",
         help="per robot-step timings of env, tracker, QP, Lloyd, controller",
         formatter_class=fmt,
+        parents=[common],
     )
     b.add_argument("--json", action="store_true", help="print JSON instead of tables")
     b.add_argument("--quick", action="store_true", help="fewer repetitions")
     b.add_argument(
         "--n-agents",
-        type=_positive_int("--n-agents"),
+        type=_int_in("--n-agents", 2, BENCH_MAX_AGENTS),
         nargs="+",
         default=None,
-        help="team sizes (default 6 9 12 24 48)",
+        help=f"team sizes, each in [2, {BENCH_MAX_AGENTS}] (the tracker and controller need a "
+        "neighbour; the env section keeps the 40 m arena) (default 6 9 12 24 48)",
     )
     b.set_defaults(func=run_bench)
 
-    t = sub.add_parser("train", help="train a policy with stable-baselines3", formatter_class=fmt)
+    t = sub.add_parser(
+        "train",
+        help="train a policy with stable-baselines3",
+        formatter_class=fmt,
+        parents=[common],
+    )
     try:
         from fov_marl.training.cli_support import add_train_arguments, run_train
 
@@ -359,15 +511,50 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _raised_by_fov_marl(exc: BaseException) -> bool:
+    """True when ``exc`` was raised by fov_marl's own code (its argument checks), not
+    inside a third-party library (then it is an unexpected error: show the traceback)."""
+    cause = exc.__cause__
+    if type(cause).__name__ == "_RemoteTraceback":  # from a worker process
+        import re
+
+        files = re.findall(r'File "([^"]+)"', str(cause))
+        return bool(files) and os.path.abspath(files[-1]).startswith(_PACKAGE_DIR + os.sep)
+    tb = exc.__traceback__
+    if tb is None:
+        return True
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    return os.path.abspath(tb.tb_frame.f_code.co_filename).startswith(_PACKAGE_DIR + os.sep)
+
+
+def _describe_os_error(exc: OSError) -> str:
+    name = f"{exc.filename}: " if exc.filename else ""
+    return f"{name}{exc.strerror or _one_line(exc)}"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``fov-marl`` with ``argv``; returns the exit status (argparse's own errors
+    and ``--help`` raise ``SystemExit``, status 2 and 0)."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    debug = bool(getattr(args, "debug", False)) or bool(os.environ.get("FOV_MARL_DEBUG"))
     try:
         args.func(args)
-    except ValueError as exc:  # config and argument errors: one line, no traceback
-        if os.environ.get("FOV_MARL_DEBUG"):
+    except KeyboardInterrupt:
+        if debug:
             raise
-        sys.stderr.write(f"fov-marl {args.command}: error: {exc}\n")
+        sys.stderr.write(f"fov-marl {args.command}: interrupted\n")
+        return 130
+    except ValueError as exc:  # config and argument errors: one line, no traceback
+        if debug or not _raised_by_fov_marl(exc):
+            raise
+        sys.stderr.write(f"fov-marl {args.command}: error: {_one_line(exc)}\n")
+        return 2
+    except OSError as exc:  # files: unreadable input, output that cannot be written
+        if debug:
+            raise
+        sys.stderr.write(f"fov-marl {args.command}: error: {_one_line(_describe_os_error(exc))}\n")
         return 2
     return 0
 

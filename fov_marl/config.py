@@ -252,6 +252,17 @@ class ScenarioConfig:
             "cells per axis",
             f"arena_size_m = {L}",
         )
+        if self.initial_poses is None and self.n_agents > 1:
+            # random starts lie in [r + 0.5, L - r - 0.5]^2 (envs.world); Oler's bound on
+            # points at mutual distance >= s in a square of side W is a necessary condition
+            W, sep = L - 2 * self.robot_radius_m - 1.0, self.init_min_separation_m
+            fit = math.floor(2 / math.sqrt(3) * (W / sep) ** 2 + 2 * W / sep + 1)
+            if self.n_agents > fit:
+                raise ConfigError(
+                    f"init_min_separation_m = {sep}: at most {fit} robots fit at this "
+                    f"separation in arena_size_m = {L} (random starts), got n_agents = "
+                    f"{self.n_agents}; lower init_min_separation_m or give initial_poses"
+                )
         stencil = self.n_agents * (2.0 * self.sensing_radius_m / h + 3)
         check_budget(
             "sensing_radius_m",

@@ -28,7 +28,9 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 from collections.abc import Collection, Iterable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -49,6 +51,8 @@ __all__ = [
     "check_seed",
     "check_budget",
     "as_real_vector",
+    "check_out_dir",
+    "check_out_file",
 ]
 
 
@@ -352,3 +356,74 @@ def as_real_vector(name: str, value: Any, n: int) -> np.ndarray | str:
     if x.shape != (n,):
         return f"must have shape ({n},), got shape {x.shape}"
     return x.astype(np.float64, copy=False)
+
+
+# ------------------------------------------------------------------------ output paths
+def _path_reason(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
+    return " ".join(str(exc).split())
+
+
+def _check_parent_writable(name: str, text: str, p: Path) -> None:
+    anc = p
+    while not os.path.lexists(anc) and anc.parent != anc:
+        anc = anc.parent
+    if not anc.is_dir():
+        raise ConfigError(f"{name} {text}: {anc} is not a directory")
+    if not os.access(anc, os.W_OK | os.X_OK):
+        raise ConfigError(f"{name} {text}: {anc} is not writable")
+
+
+def check_out_dir(name: str, value: str | os.PathLike) -> Path:
+    """``value`` must be an output directory that exists or can be created: not empty,
+    not an existing non-directory, not under a non-directory, writable. Checked before
+    any work starts (nothing is created here).
+
+    Returns:
+        ``Path(value)``.
+    """
+    if not isinstance(value, str | os.PathLike):
+        raise ConfigError(f"{name} must be a directory path, got {describe(value)}")
+    text = os.fspath(value)
+    if not isinstance(text, str) or not text.strip():
+        raise ConfigError(f"{name} must be a directory path, got {describe(value)}")
+    try:
+        p = Path(text)
+        if os.path.lexists(p) and not p.is_dir():
+            raise ConfigError(f"{name} {text}: exists and is not a directory")
+        _check_parent_writable(name, text, p)
+    except ConfigError:
+        raise
+    except (OSError, ValueError) as exc:  # NUL bytes, names too long, loops
+        raise ConfigError(f"{name} {text!r}: not a usable path ({_path_reason(exc)})") from None
+    return p
+
+
+def check_out_file(name: str, value: str | os.PathLike, suffixes: Sequence[str]) -> Path:
+    """``value`` must be a writable output file path ending in one of ``suffixes``:
+    not empty, not an existing directory, not under a non-directory. An existing file
+    is overwritten.
+
+    Returns:
+        ``Path(value)``.
+    """
+    if not isinstance(value, str | os.PathLike):
+        raise ConfigError(f"{name} must be a file path, got {describe(value)}")
+    text = os.fspath(value)
+    if not isinstance(text, str) or not text.strip():
+        raise ConfigError(f"{name} must be a file path, got {describe(value)}")
+    try:
+        p = Path(text)
+        if p.suffix.lower() not in suffixes:
+            raise ConfigError(f"{name} must end in {', '.join(suffixes)}, got {p.name!r}")
+        if p.is_dir():
+            raise ConfigError(f"{name} {text}: is a directory")
+        if os.path.lexists(p) and not os.access(p, os.W_OK):
+            raise ConfigError(f"{name} {text}: exists and is not writable")
+        _check_parent_writable(name, text, p.parent)
+    except ConfigError:
+        raise
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{name} {text!r}: not a usable path ({_path_reason(exc)})") from None
+    return p

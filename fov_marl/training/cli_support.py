@@ -23,6 +23,7 @@ import argparse
 import importlib.util
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -33,40 +34,66 @@ for _pkg in ("stable_baselines3", "torch"):
 __all__ = ["add_train_arguments", "run_train", "parse_hyperparams"]
 
 _DEFAULT_TIMESTEPS = 1_000_000
+MAX_SEED = 2**31 - 1  # stable-baselines3 seeds NumPy's legacy generator (< 2**32)
 
 
-def _int_at_least(flag: str, lo: int):
+def _int_in(flag: str, lo: int, hi: int | None = None, *, sci: bool = False):
+    """argparse type: an integer in ``[lo, hi]``; ``sci`` also takes ``1e6`` notation."""
+    allowed = f"an integer in [{lo}, {hi}]" if hi is not None else f"an integer >= {lo}"
+
     def conv(s: str) -> int:
+        text = s.strip()
         try:
-            f = float(s)
+            v = int(text)
         except ValueError:
-            f = math.nan
-        if not (math.isfinite(f) and f.is_integer()):
-            raise argparse.ArgumentTypeError(f"{flag} must be an integer >= {lo}, got {s!r}")
-        v = int(s) if s.strip().lstrip("+-").isdigit() else int(f)
-        if v < lo:
-            raise argparse.ArgumentTypeError(f"{flag} must be an integer >= {lo}, got {s!r}")
+            v = None
+            if sci:
+                try:
+                    f = float(text)
+                except ValueError:
+                    f = math.nan
+                if math.isfinite(f) and f.is_integer():
+                    v = int(f)
+        if v is None or v < lo or (hi is not None and v > hi):
+            raise argparse.ArgumentTypeError(f"{flag} must be {allowed}, got {s!r}")
         return v
 
     return conv
 
 
-def parse_hyperparams(items: list[str] | None) -> dict[str, Any]:
+def _fov(flag: str):
+    def conv(s: str) -> float:
+        try:
+            v = float(s)
+        except ValueError:
+            v = math.nan
+        if not (math.isfinite(v) and 0.0 < v <= 360.0):
+            raise argparse.ArgumentTypeError(f"{flag} must be a number in (0, 360], got {s!r}")
+        return v
+
+    return conv
+
+
+def parse_hyperparams(items: list[str] | None, flag: str = "--hp") -> dict[str, Any]:
     """``["key=value", ...]`` -> dict; values are parsed as JSON when they can be
     (``n_steps=128``, ``policy_kwargs={"net_arch": [32, 32]}``), else kept as strings.
+    A key given twice keeps the last value.
 
     Raises:
-        ValueError: an item without ``=``.
+        ValueError: an item without ``=`` or with an empty key (the message names ``flag``).
     """
     out: dict[str, Any] = {}
     for item in items or []:
         if "=" not in item:
-            raise ValueError(f"--hp must be KEY=VALUE, got {item!r}")
+            raise ValueError(f"{flag} must be KEY=VALUE, got {item!r}")
         key, value = item.split("=", 1)
+        key = key.strip()
+        if not key:
+            raise ValueError(f"{flag} must be KEY=VALUE with a non-empty KEY, got {item!r}")
         try:
-            out[key.strip()] = json.loads(value)
+            out[key] = json.loads(value)
         except json.JSONDecodeError:
-            out[key.strip()] = value
+            out[key] = value
     return out
 
 
@@ -94,30 +121,35 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--timesteps",
-        type=_int_at_least("--timesteps", 1),
+        type=_int_in("--timesteps", 1, 10**12, sci=True),
         default=_DEFAULT_TIMESTEPS,
-        help="robot-steps (samples) to train for; 1e6 notation accepted",
+        help="robot-steps (samples) to train for, in [1, 1e12]; 1e6 notation accepted",
     )
     parser.add_argument(
         "--seed",
-        type=_int_at_least("--seed", 0),
+        type=_int_in("--seed", 0, MAX_SEED),
         default=0,
-        help="seeds SB3 and the env copies (copy k: seed + k)",
+        help=f"seeds SB3 and the env copies (copy k: seed + k), in [0, {MAX_SEED}]",
     )
     parser.add_argument("--out", required=True, help="output folder (model.zip, config.json, tb/)")
-    parser.add_argument("--n-envs", type=_int_at_least("--n-envs", 1), default=4, help="env copies")
     parser.add_argument(
-        "--n-agents",
-        type=_int_at_least("--n-agents", 1),
-        default=None,
-        help="robots N (default: the scenario's, 6 or 4)",
+        "--n-envs", type=_int_in("--n-envs", 1, 1024), default=4, help="env copies, in [1, 1024]"
     )
     parser.add_argument(
-        "--fov-deg", type=float, default=None, help="camera amplitude beta (deg; default 120)"
+        "--n-agents",
+        type=_int_in("--n-agents", 1, 256),
+        default=None,
+        help="robots N in [1, 256] (default: the scenario's, 6 or 4)",
+    )
+    parser.add_argument(
+        "--fov-deg",
+        type=_fov("--fov-deg"),
+        default=None,
+        help="camera amplitude beta in degrees, (0, 360] (default 120)",
     )
     parser.add_argument(
         "--train-max-cycles",
-        type=_int_at_least("--train-max-cycles", 1),
+        type=_int_in("--train-max-cycles", 1),
         default=500,
         help="episode length while training (evaluation keeps the env's 1000)",
     )
@@ -131,17 +163,18 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         "--hp",
         action="append",
         metavar="KEY=VALUE",
-        help="SB3 hyper-parameter override, repeatable (e.g. --hp n_steps=128)",
+        help="SB3 hyper-parameter override, repeatable (e.g. --hp n_steps=128); unknown keys "
+        "and bad values are errors naming the key (see fov_marl.training.HYPERPARAM_SPECS)",
     )
     parser.add_argument(
         "--checkpoint-every",
-        type=_int_at_least("--checkpoint-every", 0),
+        type=_int_in("--checkpoint-every", 0, sci=True),
         default=100_000,
         help="timesteps between checkpoints in OUT/checkpoints (0: none)",
     )
     parser.add_argument(
         "--torch-threads",
-        type=_int_at_least("--torch-threads", 1),
+        type=_int_in("--torch-threads", 1, 1024),
         default=1,
         help="torch.set_num_threads while training (1 is fastest for these small MLPs)",
     )
@@ -149,37 +182,69 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--verbose", action="store_true", help="print SB3's log table")
 
 
+def _flag_of(message: str, args: argparse.Namespace) -> str:
+    """The flag a config/hyper-parameter error comes from (by the name it starts with)."""
+    from fov_marl.config import ScenarioConfig
+    from fov_marl.training.trainer import HYPERPARAM_SPECS
+
+    m = re.match(r"(?:unknown )?([A-Za-z_][A-Za-z0-9_]*)", message)
+    name = m.group(1) if m else ""
+    if name in HYPERPARAM_SPECS.get(args.algo, {}) or message.startswith(
+        f"unknown {args.algo.upper()}"
+    ):
+        return "--hp"
+    if name == "n_agents" and args.n_agents is not None:
+        return "--n-agents"
+    if name == "fov_deg" and args.fov_deg is not None:
+        return "--fov-deg"
+    if name in ScenarioConfig.__dataclass_fields__ or message.startswith("unknown config"):
+        return "--env"
+    return ""
+
+
 def run_train(args: argparse.Namespace) -> Path:
     """Run :func:`fov_marl.training.train` from parsed ``fov-marl train`` arguments.
 
-    Returns the path of ``model.zip`` (also printed). Invalid values raise
-    ``ValueError`` with one clear message.
+    Every argument (``--out``, ``--env``, ``--hp``, the scenario config and the buffer
+    sizes) is checked before training starts. Returns the path of ``model.zip`` (also
+    printed). Invalid values raise ``ValueError`` with one clear message naming the flag.
     """
-    from fov_marl.training.trainer import train
+    from fov_marl.training.trainer import train, validate_hyperparams
+    from fov_marl.validation import ConfigError, check_out_dir
 
-    env_kwargs = parse_hyperparams(getattr(args, "env", None))
+    out = check_out_dir("--out", args.out)
+    env_kwargs = parse_hyperparams(getattr(args, "env", None), flag="--env")
+    hyperparams = parse_hyperparams(args.hp, flag="--hp")
+    try:
+        validate_hyperparams(args.algo, hyperparams)
+    except ConfigError as exc:
+        raise ValueError(f"--hp {exc}") from None
     if args.n_agents is not None:
         env_kwargs["n_agents"] = args.n_agents
     if args.fov_deg is not None:
         env_kwargs["fov_deg"] = args.fov_deg
-    path = train(
-        args.algo,
-        args.scenario,
-        safety_filter=args.safety_filter,
-        belief=args.belief,
-        belief_kwargs={"init": args.belief_init} if args.belief else None,
-        timesteps=args.timesteps,
-        seed=args.seed,
-        out_dir=args.out,
-        n_envs=args.n_envs,
-        env_kwargs=env_kwargs,
-        hyperparams=parse_hyperparams(args.hp),
-        train_max_cycles=args.train_max_cycles,
-        checkpoint_every=args.checkpoint_every,
-        torch_threads=args.torch_threads,
-        progress_bar=not args.no_progress,
-        verbose=int(args.verbose),
-    )
+    try:
+        path = train(
+            args.algo,
+            args.scenario,
+            safety_filter=args.safety_filter,
+            belief=args.belief,
+            belief_kwargs={"init": args.belief_init} if args.belief else None,
+            timesteps=args.timesteps,
+            seed=args.seed,
+            out_dir=out,
+            n_envs=args.n_envs,
+            env_kwargs=env_kwargs,
+            hyperparams=hyperparams,
+            train_max_cycles=args.train_max_cycles,
+            checkpoint_every=args.checkpoint_every,
+            torch_threads=args.torch_threads,
+            progress_bar=not args.no_progress,
+            verbose=int(args.verbose),
+        )
+    except ConfigError as exc:
+        flag = _flag_of(str(exc), args)
+        raise ValueError(f"{flag} {exc}" if flag else str(exc)) from None
     cfg = json.loads((Path(path).parent / "config.json").read_text())
     print(
         f"saved {path} ({cfg['timesteps_done']} timesteps in {cfg['train_wall_s']:.0f} s, "

@@ -94,6 +94,7 @@ import platform
 import sys
 import time
 import warnings
+import zipfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -115,6 +116,18 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 from fov_marl.config import make_config
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
 from fov_marl.training.vec_env import ParallelEnvVecEnv
+from fov_marl.validation import (
+    ConfigError,
+    check_bool,
+    check_budget,
+    check_choice,
+    check_int,
+    check_keys,
+    check_out_dir,
+    check_real,
+    describe,
+    is_integer,
+)
 
 __all__ = [
     "ALGOS",
@@ -128,6 +141,10 @@ __all__ = [
     "load_policy",
     "LearnedPolicy",
     "FovMetricsCallback",
+    "HYPERPARAM_SPECS",
+    "POLICY_KWARGS_SPECS",
+    "MAX_BUFFER_BYTES",
+    "validate_hyperparams",
 ]
 
 ALGOS = {"ppo": PPO, "sac": SAC}
@@ -286,6 +303,231 @@ class FovMetricsCallback(BaseCallback):
 
 
 # ---------------------------------------------------------------- hyperparams
+#: Resource guard: SB3's rollout (PPO) or replay (SAC) buffer may take at most this
+#: many bytes (float32 observations, actions and per-sample scalars).
+MAX_BUFFER_BYTES = 4 * 2**30
+MAX_SEED = 2**31 - 1
+
+#: Accepted ``hyperparams`` keys per algorithm: key -> (kind, lo, hi). Kinds: "int",
+#: "real", "real+" (lo open), "bool", "real|None", "policy_kwargs", "train_freq",
+#: "ent_coef" (SAC: a real > 0, "auto" or "auto_<real>"), "target_entropy" ("auto" or
+#: a real), "gradient_steps" (-1 or an int in [0, hi]).
+HYPERPARAM_SPECS: dict[str, dict[str, tuple[str, float, float]]] = {
+    "ppo": {
+        "learning_rate": ("real+", 0.0, 1.0),
+        "n_steps": ("int", 1, 10**6),
+        "batch_size": ("int", 2, 10**6),
+        "n_epochs": ("int", 1, 1000),
+        "gamma": ("real", 0.0, 1.0),
+        "gae_lambda": ("real", 0.0, 1.0),
+        "clip_range": ("real+", 0.0, 10.0),
+        "clip_range_vf": ("real|None", 0.0, 1e3),
+        "normalize_advantage": ("bool", 0, 0),
+        "ent_coef": ("real", 0.0, 1e3),
+        "vf_coef": ("real", 0.0, 1e3),
+        "max_grad_norm": ("real+", 0.0, 1e6),
+        "use_sde": ("bool", 0, 0),
+        "sde_sample_freq": ("int", -1, 10**6),
+        "target_kl": ("real|None", 0.0, 1e3),
+        "stats_window_size": ("int", 1, 10**6),
+        "policy_kwargs": ("policy_kwargs", 0, 0),
+    },
+    "sac": {
+        "learning_rate": ("real+", 0.0, 1.0),
+        "buffer_size": ("int", 1, 10**8),
+        "learning_starts": ("int", 0, 10**9),
+        "batch_size": ("int", 1, 10**6),
+        "tau": ("real+", 0.0, 1.0),
+        "gamma": ("real", 0.0, 1.0),
+        "train_freq": ("train_freq", 1, 10**6),
+        "gradient_steps": ("gradient_steps", 0, 10**4),
+        "n_steps": ("int", 1, 1000),
+        "ent_coef": ("ent_coef", 0.0, 1e3),
+        "target_update_interval": ("int", 1, 10**6),
+        "target_entropy": ("target_entropy", -1e6, 1e6),
+        "use_sde": ("bool", 0, 0),
+        "sde_sample_freq": ("int", -1, 10**6),
+        "use_sde_at_warmup": ("bool", 0, 0),
+        "stats_window_size": ("int", 1, 10**6),
+        "policy_kwargs": ("policy_kwargs", 0, 0),
+    },
+}
+#: Accepted ``policy_kwargs`` keys per algorithm (same kinds; "net_arch": a list of at
+#: most 8 layer widths in [1, 1024], or a dict of such lists with keys "pi"/"vf" (PPO)
+#: or "pi"/"qf" (SAC); "activation_fn": a name of ``_ACTIVATIONS``).
+POLICY_KWARGS_SPECS: dict[str, dict[str, tuple[str, float, float]]] = {
+    "ppo": {
+        "net_arch": ("net_arch", 1, 1024),
+        "activation_fn": ("activation_fn", 0, 0),
+        "ortho_init": ("bool", 0, 0),
+        "log_std_init": ("real", -20.0, 20.0),
+        "share_features_extractor": ("bool", 0, 0),
+    },
+    "sac": {
+        "net_arch": ("net_arch", 1, 1024),
+        "activation_fn": ("activation_fn", 0, 0),
+        "log_std_init": ("real", -20.0, 20.0),
+        "clip_mean": ("real+", 0.0, 1e3),
+        "n_critics": ("int", 1, 10),
+        "share_features_extractor": ("bool", 0, 0),
+    },
+}
+_NET_ARCH_KEYS = {"ppo": ("pi", "vf"), "sac": ("pi", "qf")}
+_MAX_LAYERS = 8
+
+
+def _check_hp_value(algo: str, name: str, value: Any, spec: tuple[str, float, float]) -> Any:
+    kind, lo, hi = spec
+    if kind == "int":
+        return check_int(name, value, int(lo), int(hi))
+    if kind == "real":
+        return check_real(name, value, lo, hi)
+    if kind == "real+":
+        return check_real(name, value, lo, hi, lo_open=True)
+    if kind == "real|None":
+        return (
+            None
+            if value is None
+            else check_real(name, value, lo, hi, lo_open=True, note="(or null)")
+        )
+    if kind == "bool":
+        return check_bool(name, value)
+    if kind == "gradient_steps":
+        if is_integer(value) and int(value) == -1:
+            return -1
+        return check_int(name, value, int(lo), int(hi), note="(or -1: as many as env steps)")
+    if kind == "train_freq":
+        if isinstance(value, list | tuple):
+            if len(value) != 2:
+                raise ConfigError(
+                    f"{name} must be an integer or [integer, 'step' | 'episode'], got {describe(value)}"
+                )
+            n = check_int(f"{name}[0]", value[0], int(lo), int(hi))
+            unit = check_choice(f"{name}[1]", value[1], ("step", "episode"))
+            return (n, unit)
+        return check_int(name, value, int(lo), int(hi), note="(or [n, 'step' | 'episode'])")
+    if kind == "ent_coef":
+        if isinstance(value, str) and (value == "auto" or value.startswith("auto_")):
+            if value != "auto":
+                check_real(
+                    f"{name} (auto_<initial value>)",
+                    _float_or_none(value[5:]),
+                    0.0,
+                    hi,
+                    lo_open=True,
+                )
+            return value
+        return check_real(name, value, lo, hi, lo_open=True, note="(or 'auto', 'auto_<initial>')")
+    if kind == "target_entropy":
+        if isinstance(value, str) and value == "auto":
+            return value
+        return check_real(name, value, lo, hi, note="(or 'auto')")
+    if kind == "activation_fn":
+        return check_choice(name, value, sorted(_ACTIVATIONS))
+    if kind == "net_arch":
+        return _check_net_arch(algo, name, value, int(lo), int(hi))
+    if kind == "policy_kwargs":
+        if not isinstance(value, dict):
+            raise ConfigError(f"{name} must be a JSON object (dict), got {describe(value)}")
+        specs = POLICY_KWARGS_SPECS[algo]
+        check_keys(f"{algo.upper()} policy_kwargs keys", value, specs)
+        return {
+            k: _check_hp_value(algo, f"policy_kwargs.{k}", v, specs[k]) for k, v in value.items()
+        }
+    raise AssertionError(kind)
+
+
+def _float_or_none(text: str) -> Any:
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _check_layers(name: str, value: Any, lo: int, hi: int) -> list[int]:
+    if not isinstance(value, list | tuple) or len(value) > _MAX_LAYERS:
+        raise ConfigError(
+            f"{name} must be a list of at most {_MAX_LAYERS} layer widths in [{lo}, {hi}], "
+            f"got {describe(value)}"
+        )
+    return [check_int(f"{name}[{k}]", w, lo, hi) for k, w in enumerate(value)]
+
+
+def _check_net_arch(algo: str, name: str, value: Any, lo: int, hi: int) -> Any:
+    if isinstance(value, dict):
+        keys = _NET_ARCH_KEYS[algo]
+        check_keys(f"{name} keys", value, keys)
+        return {k: _check_layers(f"{name}.{k}", v, lo, hi) for k, v in value.items()}
+    return _check_layers(name, value, lo, hi)
+
+
+def validate_hyperparams(algo: str, hyperparams: Any) -> dict[str, Any]:
+    """Check SB3 overrides for ``algo``: known keys, types and ranges (see
+    :data:`HYPERPARAM_SPECS` and :data:`POLICY_KWARGS_SPECS`).
+
+    Returns:
+        The overrides with normalised values (Python numbers, tuples for ``train_freq``).
+
+    Raises:
+        ConfigError: an unknown key (the message lists the valid ones) or a bad value
+            (the message names the key, the value and the allowed range).
+    """
+    if algo not in ALGOS:
+        raise ConfigError(f"algo must be one of {sorted(ALGOS)}, got {describe(algo)}")
+    if hyperparams is None:
+        return {}
+    if not isinstance(hyperparams, dict):
+        raise ConfigError(f"hyperparams must be a dict or None, got {describe(hyperparams)}")
+    specs = HYPERPARAM_SPECS[algo]
+    for key in hyperparams:
+        if not isinstance(key, str):
+            raise ConfigError(f"hyper-parameter names must be strings, got {describe(key)}")
+    check_keys(f"{algo.upper()} hyper-parameters", hyperparams, specs)
+    return {k: _check_hp_value(algo, k, v, specs[k]) for k, v in hyperparams.items()}
+
+
+def _check_buffer(algo: str, hp: dict[str, Any], n_slots: int, obs_dim: int, act_dim: int) -> None:
+    """Resource guard on SB3's buffer (:data:`MAX_BUFFER_BYTES`) and PPO's rollout size."""
+    slots = f"n_envs x n_agents = {n_slots} slots, {obs_dim} observations"
+    if algo == "ppo":
+        n_steps = int(hp["n_steps"])
+        if n_steps * n_slots < 2:
+            raise ConfigError(
+                f"n_steps = {n_steps} ({slots}): PPO needs n_steps x slots >= 2; raise n_steps"
+            )
+        need = 4.0 * n_steps * n_slots * (obs_dim + act_dim + 6)
+        check_budget(
+            "n_steps", n_steps, need, MAX_BUFFER_BYTES, "the PPO rollout buffer", "bytes", slots
+        )
+    else:
+        size = int(hp["buffer_size"])
+        need = 4.0 * size * (2 * obs_dim + act_dim + 3)
+        check_budget(
+            "buffer_size", size, need, MAX_BUFFER_BYTES, "the SAC replay buffer", "bytes", slots
+        )
+
+
+def _check_wrapper_kwargs(
+    safety_filter_kwargs: dict[str, Any] | None, belief_kwargs: dict[str, Any] | None
+) -> None:
+    """Wrapper keywords must be parameters of the wrappers (their values are checked by
+    the wrappers themselves when the probe env is built)."""
+    import inspect
+
+    from fov_marl.wrappers import SafetyFilterWrapper
+    from fov_marl.wrappers.belief import BeliefObservationWrapper
+
+    for name, kw, cls in (
+        ("safety_filter_kwargs", safety_filter_kwargs, SafetyFilterWrapper),
+        ("belief_kwargs", belief_kwargs, BeliefObservationWrapper),
+    ):
+        if kw:
+            valid = [
+                p for p in inspect.signature(cls.__init__).parameters if p not in ("self", "env")
+            ]
+            check_keys(f"{name} keys", kw, valid)
+
+
 def _merged_hyperparams(algo: str, overrides: dict[str, Any] | None) -> dict[str, Any]:
     hp = copy.deepcopy(DEFAULT_HYPERPARAMS[algo])
     for key, value in (overrides or {}).items():
@@ -385,27 +627,31 @@ def train(
     Raises:
         ValueError: unknown algo/scenario, bad numbers, invalid config fields.
     """
-    if algo not in ALGOS:
-        raise ValueError(f"algo must be one of {sorted(ALGOS)}, got {algo!r}")
-    if scenario not in SCENARIOS:
-        raise ValueError(f"scenario must be one of {sorted(SCENARIOS)}, got {scenario!r}")
-    for name, value, lo in (
-        ("timesteps", timesteps, 1),
-        ("n_envs", n_envs, 1),
-        ("checkpoint_every", checkpoint_every, 0),
-        ("torch_threads", torch_threads, 1),
-        ("seed", seed, 0),
+    # Every argument is checked before any work (and before out_dir is created).
+    algo = check_choice("algo", algo, sorted(ALGOS))
+    scenario = check_choice("scenario", scenario, sorted(SCENARIOS))
+    timesteps = check_int("timesteps", timesteps, 1, 10**12)
+    n_envs = check_int("n_envs", n_envs, 1, 1024)
+    checkpoint_every = check_int("checkpoint_every", checkpoint_every, 0)
+    torch_threads = check_int("torch_threads", torch_threads, 1, 1024)
+    seed = check_int("seed", seed, 0, MAX_SEED)
+    verbose = check_int("verbose", verbose, 0, 2)
+    safety_filter = check_bool("safety_filter", safety_filter)
+    belief = check_bool("belief", belief)
+    normalize = check_bool("normalize", normalize)
+    progress_bar = check_bool("progress_bar", progress_bar)
+    if train_max_cycles is not None:
+        train_max_cycles = check_int("train_max_cycles", train_max_cycles, 1, note="(or None)")
+    out = check_out_dir("out_dir", out_dir)
+    overrides = validate_hyperparams(algo, hyperparams)
+    for name, value in (
+        ("env_kwargs", env_kwargs),
+        ("safety_filter_kwargs", safety_filter_kwargs),
+        ("belief_kwargs", belief_kwargs),
     ):
-        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < lo:
-            raise ValueError(f"{name} must be an integer in [{lo}, inf), got {value!r}")
-    if train_max_cycles is not None and (
-        isinstance(train_max_cycles, bool)
-        or not isinstance(train_max_cycles, int | np.integer)
-        or train_max_cycles < 1
-    ):
-        raise ValueError(
-            f"train_max_cycles must be None or an integer >= 1, got {train_max_cycles}"
-        )
+        if value is not None and not isinstance(value, dict):
+            raise ConfigError(f"{name} must be a dict or None, got {describe(value)}")
+    _check_wrapper_kwargs(safety_filter_kwargs, belief_kwargs)
 
     env_kwargs = dict(env_kwargs or {})
     train_kwargs = dict(env_kwargs)
@@ -424,11 +670,14 @@ def train(
         max_cycles=env_kwargs.get("max_cycles", make_config(scenario=scenario).max_cycles)
     )
     n_agents = len(probe.possible_agents)
+    agent0 = probe.possible_agents[0]
+    obs_dim = int(np.prod(probe.observation_space(agent0).shape))
+    act_dim = int(np.prod(probe.action_space(agent0).shape))
     probe.close()
 
-    hp = _merged_hyperparams(algo, hyperparams)
+    hp = _merged_hyperparams(algo, overrides)
+    _check_buffer(algo, hp, int(n_envs) * n_agents, obs_dim, act_dim)
     sb3_kwargs = _to_sb3_kwargs(hp)
-    out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
 
     prev_threads = torch.get_num_threads()
@@ -664,7 +913,10 @@ def _find_config(model_path: Path) -> Path:
     for d in (model_path.parent, model_path.parent.parent):
         if (d / "config.json").is_file():
             return d / "config.json"
-    raise ValueError(f"no config.json beside {model_path} or in its parent folder")
+    raise ValueError(
+        f"{model_path}: no config.json beside it or in its parent folder (a model saved by "
+        "`fov-marl train` has one)"
+    )
 
 
 def _find_vecnormalize(model_path: Path) -> Path | None:
@@ -680,6 +932,55 @@ def _find_vecnormalize(model_path: Path) -> Path | None:
     return None
 
 
+def _read_config(path: Path) -> dict[str, Any]:
+    """``config.json`` written by :func:`train`, checked field by field."""
+    try:
+        config = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: not a readable JSON file ({_reason(exc)})") from None
+    if not isinstance(config, dict):
+        raise ValueError(f"{path}: must hold a JSON object, got {type(config).__name__}")
+    if config.get("format") != CONFIG_FORMAT:
+        raise ValueError(
+            f"{path}: format must be {CONFIG_FORMAT!r} (written by `fov-marl train`), "
+            f"got {config.get('format')!r}"
+        )
+    try:
+        check_choice("algo", config.get("algo"), sorted(ALGOS))
+        check_choice("scenario", config.get("scenario"), sorted(SCENARIOS))
+        check_int("n_agents", config.get("n_agents"), 1, 256)
+        for key in ("env_kwargs", "safety_filter_kwargs", "belief_kwargs"):
+            if not isinstance(config.get(key, {}), dict):
+                raise ConfigError(f"{key} must be a JSON object, got {describe(config[key])}")
+        for key in ("safety_filter", "belief", "normalize"):
+            check_bool(key, config.get(key, False))
+    except ConfigError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    return config
+
+
+def _reason(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+#: what loading a damaged or foreign file raises inside SB3, torch, zipfile or pickle
+_LOAD_ERRORS = (
+    AssertionError,
+    AttributeError,
+    EOFError,
+    ImportError,
+    IndexError,
+    KeyError,
+    OSError,
+    RuntimeError,
+    TypeError,
+    ValueError,
+    pickle.UnpicklingError,
+    zipfile.BadZipFile,
+)
+
+
 def load_policy(path: str | os.PathLike, env: Any | None = None) -> LearnedPolicy:
     """Load ``model.zip`` (or a run folder, or a checkpoint) saved by :func:`train`.
 
@@ -688,29 +989,73 @@ def load_policy(path: str | os.PathLike, env: Any | None = None) -> LearnedPolic
         env: optional evaluation env to :meth:`LearnedPolicy.bind`.
 
     Raises:
-        ValueError: missing files or a config written by an unknown format.
+        ValueError: a missing file, a config written by an unknown format, or a file
+            that is not what :func:`train` saved (truncated, empty, corrupt, another
+            program's zip, a model whose spaces differ from its config's env); the
+            message names the file and says what is wrong.
     """
     p = Path(path)
     if p.is_dir():
         p = p / "model.zip"
     if not p.is_file():
         raise ValueError(f"policy file {p} does not exist")
-    config = json.loads(_find_config(p).read_text())
-    if config.get("format") != CONFIG_FORMAT:
+    if not zipfile.is_zipfile(p):
+        size = p.stat().st_size
+        what = "empty" if size == 0 else f"not a zip archive ({size} bytes; truncated or corrupt?)"
+        raise ValueError(f"{p}: {what}; expected a model.zip saved by `fov-marl train`")
+    config = _read_config(_find_config(p))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # SB3 warns about version mismatches
+            model = ALGOS[config["algo"]].load(str(p), device="cpu")
+    except _LOAD_ERRORS as exc:
         raise ValueError(
-            f"config.json format must be {CONFIG_FORMAT!r}, got {config.get('format')!r}"
-        )
-    model = ALGOS[config["algo"]].load(str(p), device="cpu")
+            f"{p}: not a {config['algo'].upper()} model saved by `fov-marl train` ({_reason(exc)})"
+        ) from None
     obs_norm = None
     if config.get("normalize", False):
         vn_path = _find_vecnormalize(p)
         if vn_path is None:
             raise ValueError(f"the policy was trained with normalisation but no stats beside {p}")
-        with open(vn_path, "rb") as f:
-            obs_norm = pickle.load(f)
+        try:
+            with open(vn_path, "rb") as f:
+                obs_norm = pickle.load(f)
+        except _LOAD_ERRORS as exc:
+            raise ValueError(f"{vn_path}: not normalisation statistics ({_reason(exc)})") from None
+        if not callable(getattr(obs_norm, "normalize_obs", None)):
+            raise ValueError(
+                f"{vn_path}: not normalisation statistics (a {type(obs_norm).__name__})"
+            )
         obs_norm.training = False
         obs_norm.norm_reward = False
     policy = LearnedPolicy(model, config, obs_norm)
+    _check_model_spaces(policy, p)
     if env is not None:
         policy.bind(env)
     return policy
+
+
+def _check_model_spaces(policy: LearnedPolicy, path: Path) -> None:
+    """The model's observation/action sizes must match the env its config describes."""
+    try:
+        env = build_env(
+            policy.scenario,
+            policy.env_kwargs,
+            safety_filter=False,
+            belief=policy.belief,
+            belief_kwargs=policy.belief_kwargs,
+        )
+    except ValueError as exc:
+        raise ValueError(f"{path}: its config.json does not describe a valid env ({exc})") from None
+    agent = env.possible_agents[0]
+    want_obs = tuple(env.observation_space(agent).shape)
+    want_act = tuple(env.action_space(agent).shape)
+    env.close()
+    got_obs = tuple(getattr(policy.model.observation_space, "shape", ()) or ())
+    got_act = tuple(getattr(policy.model.action_space, "shape", ()) or ())
+    if got_obs != want_obs or got_act != want_act:
+        raise ValueError(
+            f"{path}: the model takes observations of shape {got_obs} and gives actions of "
+            f"shape {got_act}, but its config.json describes an env with {want_obs} and "
+            f"{want_act}"
+        )
