@@ -42,6 +42,7 @@ from fov_marl.control import (
     coverage_desired_inputs,
     crossing_desired_input,
 )
+from fov_marl.control.safety import SafetyRows, safety_rows
 from fov_marl.estimation import TrackerBank, TrackerParams
 from fov_marl.geometry import relative_pose
 from fov_marl.spaces import ObservationLayout, velocity_to_action
@@ -111,7 +112,7 @@ class PfCbfPipeline:
         self._goal_body = np.zeros((self.n, 2))
         self.last_results: list[ControlResult | None] = [None] * self.n
         self.last_timings: dict[str, float] = {}
-        self.counters = {"interventions": 0, "fallbacks": 0}
+        self.counters = {"interventions": 0, "fallbacks": 0, "safety_fallbacks": 0}
 
     # ------------------------------------------------------------------ views
     @property
@@ -157,7 +158,7 @@ class PfCbfPipeline:
         self._read_cues(obs_m)
         self._applied = np.zeros((self.n, 3), dtype=np.float32)
         self._need_observe = False
-        self.counters = {"interventions": 0, "fallbacks": 0}
+        self.counters = {"interventions": 0, "fallbacks": 0, "safety_fallbacks": 0}
         self.last_results = [None] * self.n
         if self.estimates == "tracker" and self.n > 1:
             self.bank = TrackerBank(self.config, self.tracker_params, seed=seed)
@@ -195,12 +196,73 @@ class PfCbfPipeline:
         return {
             "ids": e.ids,
             "mean_body": e.mean_body,
+            "cov_body": e.cov_body,
+            "detected": e.detected,
+            "counts": e.counts,
             "velocity_est_body": e.velocity_est_body,
             "ellipse_distance": e.ellipse_distance,
             "ellipse_a": e.ellipse_a,
             "ellipse_b": e.ellipse_b,
             "ellipse_psi": e.ellipse_psi,
         }
+
+    def _particles(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(p_body (N, P_T, 2), mass (N, P_T))``: every robot's particles and, for those of
+        undetected neighbours, their expected-neighbour mass ``1 / P_j`` (0 otherwise)."""
+        if self.bank is None or self.controller_params.blind_bins == 0:
+            return None
+        e = self._est
+        P = int(self.tracker_params.n_particles_total)
+        pts = np.empty((self.n, P, 2))
+        mass = np.empty((self.n, P))
+        counts = e["counts"].astype(np.float64)
+        w = np.where(e["detected"], 0.0, 1.0 / np.maximum(counts, 1.0))  # (N, M)
+        for k in range(self.n):
+            p, owner = self.bank.particles_body(k)
+            local = owner - (owner > k)  # neighbour ID -> column of robot k's arrays
+            pts[k] = p
+            mass[k] = w[k, local]
+        return pts, mass
+
+    def safety_rows(self) -> SafetyRows:
+        """Every robot's collision rows (:mod:`fov_marl.control.safety`) from its own data."""
+        cfg, par = self.config, self.controller_params
+        e = self._est
+        if self.n > 1:
+            mean = e["mean_body"]
+            cov = e.get("cov_body")
+            if cov is None:  # oracle: exact positions, all "detected"
+                cov = np.zeros(mean.shape + (2,))
+            det = e.get("detected")
+            if det is None:
+                det = np.ones(mean.shape[:2], dtype=bool)
+            parts = self._particles() if self.estimates == "tracker" else None
+        else:
+            mean, cov, det, parts = np.zeros((1, 0, 2)), np.zeros((1, 0, 2, 2)), None, None
+        return safety_rows(
+            mean_body=mean,
+            cov_body=cov,
+            detected=det if det is not None else np.zeros((1, 0), dtype=bool),
+            velocity_est_body=e["velocity_est_body"] if self.n > 1 else None,
+            pose_world=self._own_pose,
+            particles_body=None if parts is None else parts[0],
+            particle_mass=None if parts is None else parts[1],
+            safety_distance_m=cfg.safety_distance_m,
+            v_max_mps=cfg.v_max_mps,
+            omega_max_radps=cfg.omega_max_radps,
+            dt_s=cfg.dt_s,
+            arena_size_m=cfg.arena_size_m,
+            robot_radius_m=cfg.robot_radius_m,
+            safety_risk=par.safety_risk,
+            safety_gain=par.safety_gain,
+            responsibility=par.responsibility,
+            blind_bins=par.blind_bins,
+            blind_risk=par.blind_risk,
+            blind_speed_mps=par.blind_speed_mps,
+            walls=par.walls,
+            wall_gain=par.wall_gain,
+            hold_band_m=par.safety_hold_band_m,
+        )
 
     def _oracle(self, poses_world: np.ndarray | None) -> None:
         if poses_world is None:
@@ -246,8 +308,18 @@ class PfCbfPipeline:
         u_star = np.asarray(u_star, dtype=np.float64).reshape(self.n, 3)
         t0 = time.perf_counter()
         u = u_star.copy()
-        if self.use_cbf and self.n > 1:
-            e = self._est
+        ellipse = self.controller_params.safety_model == "ellipse"
+        if self.use_cbf and (self.n > 1 or (ellipse and self.controller_params.walls)):
+            if self.n > 1:
+                e = self._est
+            else:
+                e = {
+                    "mean_body": np.zeros((1, 0, 2)),
+                    "velocity_est_body": np.zeros((1, 0, 2)),
+                    "ellipse_distance": np.zeros((1, 0)),
+                    "ids": np.zeros((1, 0), dtype=np.int64),
+                }
+            rows = self.safety_rows() if ellipse else None
             for i, ctrl in enumerate(self.controllers):
                 res = ctrl.solve(
                     u_star[i],
@@ -255,11 +327,14 @@ class PfCbfPipeline:
                     e["velocity_est_body"][i],
                     e["ellipse_distance"][i],
                     e["ids"][i],
+                    safety=None if rows is None else rows.robot(i),
+                    detected=e["detected"][i] if "detected" in e else None,
                 )
                 self.last_results[i] = res
                 u[i] = res.u
                 self.counters["interventions"] += int(res.intervened)
                 self.counters["fallbacks"] += int(res.fallback)
+                self.counters["safety_fallbacks"] += int(res.status == "safety_fallback")
         self.last_timings["qp"] = time.perf_counter() - t0
         act = velocity_to_action(u[:, :2], u[:, 2], cfg.v_max_mps, cfg.omega_max_radps)
         self._applied = act

@@ -394,6 +394,7 @@ def cbf_rows(
     params: ControllerParams,
     h_max: np.ndarray | None = None,
     v_desired_body: np.ndarray | None = None,
+    detected: np.ndarray | None = None,
 ) -> CbfRows:
     """Assemble the rows of Eq. 17 in our reading: ``A u + drift + α(h + ε) ≥ 0``.
 
@@ -415,6 +416,16 @@ def cbf_rows(
         d: ``(M,)`` ellipse distances d_ij (m).
         v_desired_body: ``(2,)`` the robot's desired planar velocity (u*'s), m/s; None
             is zero.
+        detected: ``(M,)`` bool, neighbour in the camera's last report, or None.
+            ``params.fov_translation`` decides which FoV rows keep their translation
+            terms: ``"all"`` (the paper's Eq. 17: every row that holds), ``"seen"``
+            (those of detected neighbours: a robot searches for a neighbour it does
+            not see by turning, never by driving), ``"none"`` (every FoV row is in
+            recovery, rotation only: the camera is kept on the neighbours by turning
+            and the translation is left to u* and the collision rows). Measured
+            (pfcbf, N = 6, β = 120°, seeds 0-4, mean speed over the last 50 s):
+            "all" 0.044-0.066 m/s, "seen" 0.004-0.092 m/s (holding rows of seen
+            neighbours at the sector's borders back the robot up), "none" below.
 
     Returns:
         :class:`CbfRows`.
@@ -430,8 +441,13 @@ def cbf_rows(
     eps = slack(d, config, params, h_max)
     b = drift + class_k(h + eps, params)
     if params.fov_recovery_cap > 0.0:
+        unseen = None
+        if params.fov_translation == "none":
+            unseen = np.ones(h.shape[0], dtype=bool)
+        elif params.fov_translation == "seen" and detected is not None:
+            unseen = ~np.asarray(detected, dtype=bool).reshape(-1)
         A, b, h = _recover_by_rotation(
-            A, b, h, eps, p_body, config, params.fov_recovery_cap, v_desired_body
+            A, b, h, eps, p_body, config, params.fov_recovery_cap, v_desired_body, unseen
         )
     if params.safety_speed_margin_mps > 0.0:
         p = np.asarray(p_body, dtype=np.float64)
@@ -448,6 +464,7 @@ def _recover_by_rotation(
     config: ScenarioConfig,
     cap: float,
     v_desired: np.ndarray | None,
+    unseen: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """FoV rows in recovery turn the camera and never drive the robot (see :func:`cbf_rows`).
 
@@ -465,6 +482,8 @@ def _recover_by_rotation(
     """
     with np.errstate(invalid="ignore"):
         rec = h + eps < 0.0  # inactive rows are +inf: never in recovery
+    if unseen is not None:  # fov_translation: every FoV row of these neighbours
+        rec |= unseen[:, None] & np.isfinite(h)
     rec[:, SAFETY_ROW] = False
     if not rec.any():
         return A, b, h

@@ -75,10 +75,13 @@ from fov_marl.control.cbf import (
 )
 from fov_marl.control.params import ControllerParams
 from fov_marl.control.qp import HierarchicalQP
+from fov_marl.control.safety import safety_rows
 
 __all__ = ["ControlResult", "FovCbfController"]
 
 _FOV_ROWS = np.array([True, True, False, True])
+#: κ* (normalised) above which the collision rows count as not met: the safe fallback
+_KAPPA_SAFETY = 1e-3
 
 
 @dataclass
@@ -164,9 +167,10 @@ class FovCbfController:
             if self._cone_b.shape[0]
             else math.pi
         )
+        self._w = float(p.omega_weight)
         self.qp = HierarchicalQP(
             config.v_max_mps,
-            config.omega_max_radps,
+            config.omega_max_radps * self._w,
             n_polygon=p.n_polygon,
             backend=p.qp_backend,
             capacity=32,
@@ -174,7 +178,20 @@ class FovCbfController:
             max_iter=p.qp_max_iter,
             reg=p.cascade_reg,
         )
-        self.stats = {"steps": 0, "fallbacks": 0, "qp_solves": 0, "interventions": 0, "relaxed": 0}
+        self.stats = {
+            "steps": 0,
+            "fallbacks": 0,
+            "safety_fallbacks": 0,
+            "qp_solves": 0,
+            "interventions": 0,
+            "relaxed": 0,
+        }
+        if self.params.safety_gain * config.dt_s > 1.0 or self.params.wall_gain * config.dt_s > 1.0:
+            raise ValueError(
+                "safety_gain * dt_s and wall_gain * dt_s must be <= 1 (discrete-time barrier), "
+                f"got {self.params.safety_gain * config.dt_s:g} and "
+                f"{self.params.wall_gain * config.dt_s:g}"
+            )
 
     def assign_levels(
         self,
@@ -244,6 +261,142 @@ class FovCbfController:
         out[2] = min(max(p.look_gain * phi, -cfg.omega_max_radps), cfg.omega_max_radps)
         return out
 
+    def _safety_rows(
+        self,
+        safety: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+        p_body: np.ndarray,
+        v_est_body: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Normalised, pruned collision rows ``(Ã (K, 3), b̃ (K,), kind (K,))`` (maybe K = 0).
+
+        Without ``safety`` rows (a controller used on its own) the neighbour rows of
+        :func:`~fov_marl.control.safety.safety_rows` are built from ``p_body`` taken as
+        exact positions (σ = 0), so collision avoidance never silently disappears.
+        """
+        p, cfg = self.params, self.config
+        if p.safety_model != "ellipse" or (safety is None and p_body.shape[0] == 0):
+            return np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=np.int8)
+        if safety is None:  # positions taken as exact: the neighbour rows alone
+            rows = safety_rows(
+                mean_body=p_body[None],
+                cov_body=np.zeros((1, p_body.shape[0], 2, 2)),
+                detected=np.ones((1, p_body.shape[0]), dtype=bool),
+                velocity_est_body=v_est_body[None],
+                pose_world=None,
+                particles_body=None,
+                particle_mass=None,
+                safety_distance_m=cfg.safety_distance_m,
+                v_max_mps=cfg.v_max_mps,
+                omega_max_radps=cfg.omega_max_radps,
+                dt_s=cfg.dt_s,
+                arena_size_m=cfg.arena_size_m,
+                robot_radius_m=cfg.robot_radius_m,
+                safety_risk=p.safety_risk,
+                safety_gain=p.safety_gain,
+                responsibility=p.responsibility,
+                blind_bins=0,
+                blind_risk=p.blind_risk,
+                blind_speed_mps=p.blind_speed_mps,
+                walls=False,
+                wall_gain=p.wall_gain,
+                hold_band_m=p.safety_hold_band_m,
+            )
+            safety = rows.robot(0)
+        A, b, kind = (np.asarray(x) for x in safety)
+        A = A.astype(np.float64).reshape(-1, 3)
+        b = b.astype(np.float64).reshape(-1)
+        kind = kind.reshape(-1)
+        if A.shape[0] != b.shape[0] or kind.shape[0] != b.shape[0]:
+            raise ValueError(
+                f"safety rows must be A (K, 3), b (K,), kind (K,); got {A.shape}, {b.shape}, "
+                f"{kind.shape}"
+            )
+        At, bt, _ = normalise_rows(A, b, cfg.v_max_mps, cfg.omega_max_radps, p.row_clip)
+        keep = bt < 1.0 if p.prune else np.isfinite(b)
+        return At[keep], bt[keep], kind[keep]
+
+    def _project(self, u: np.ndarray) -> np.ndarray:
+        """Projection onto the admissible set (polygon × ω box; separable, so the ω weight
+        of :meth:`_qp_solve` does not change it)."""
+        w = self._w
+        out = self.qp.project(np.array([u[0], u[1], u[2] * w]))
+        out[2] /= w
+        return out
+
+    def _qp_solve(self, A: np.ndarray, b: np.ndarray, level: np.ndarray, u_star: np.ndarray):
+        """The hierarchy in the weighted metric ``‖Δv‖² + λ² Δω²`` (λ = ``omega_weight``).
+
+        Solved in the variable ``[vx, vy, λω]``: the ω column of the rows is divided by
+        λ and the ω bound multiplied by it, so row authorities (and every normalised
+        offset b̃ and κ) are unchanged; the solution is mapped back.
+        """
+        w = self._w
+        if w == 1.0:
+            return self.qp.solve(A, b, level, u_star)
+        A_w = np.array(A, dtype=np.float64, copy=True)
+        A_w[:, 2] /= w
+        res = self.qp.solve(A_w, b, level, np.array([u_star[0], u_star[1], u_star[2] * w]))
+        u = np.array(res.u, dtype=np.float64, copy=True)
+        u[2] /= w
+        res.u = u
+        return res
+
+    def _unblock(self, qres, A_q, b_q, l_q, u_star: np.ndarray, n_fov: int):
+        """Deadlock resolution ("keep right", not in the paper): ``params.deadlock_turn_deg``.
+
+        Symmetric encounters (four robots crossing at one point, VII-D) stop every robot
+        at its neighbours' barriers: each projection of u* onto the collision rows is
+        ~0. When a collision row binds and the solution keeps less than a fifth of u*'s
+        progress (``u_v · v̂* < 0.2 ‖v*‖``), the hierarchy is solved again for u* with
+        its translation turned by ``−deadlock_turn_deg`` (to the right) and that
+        solution is used if it progresses more along the turned direction. All robots
+        turning the same way circulate around each other like a roundabout. Only u* is
+        changed: every row still holds (the result is a solution of the same hierarchy).
+        """
+        vs = u_star[:2]
+        speed = math.hypot(vs[0], vs[1])
+        if speed < 0.1 * self.config.v_max_mps or qres.fallback:
+            return qres
+        if qres.u[:2] @ vs >= 0.2 * speed * speed:
+            return qres
+        binding = (A_q[n_fov:] @ qres.u + b_q[n_fov:]) < 1e-3
+        if not binding.any():
+            return qres
+        a = -math.radians(self.params.deadlock_turn_deg)
+        c, s_ = math.cos(a), math.sin(a)
+        u_turn = np.array([c * vs[0] - s_ * vs[1], s_ * vs[0] + c * vs[1], u_star[2]])
+        alt = self._qp_solve(A_q, b_q, l_q, u_turn)
+        if alt.fallback or alt.u[:2] @ u_turn[:2] <= qres.u[:2] @ u_turn[:2] + 1e-9:
+            return qres
+        return alt
+
+    def _safe_fallback(
+        self, u_qp: np.ndarray | None, A: np.ndarray, b: np.ndarray, kind: np.ndarray
+    ) -> np.ndarray:
+        """The collision rows cannot all be met: the documented safe fallback.
+
+        The QP's least-violation input ``u_qp`` (None when the rows were hard and the
+        QP had no solution) is kept if it makes no collision row worse than
+        standing still does (``Ã u + b̃ ≥ min(b̃, 0)`` row by row: it retreats as well as
+        it can without closing on anything else). Otherwise the robot stops translating
+        (its own motion then shortens no distance, and with shared responsibility the
+        other robot of each pair keeps its share) and turns towards the most dangerous
+        row that is not a wall (smallest ``b̃``) at ``look_gain`` times its bearing, so
+        that the camera confirms or clears it.
+        """
+        tol = 1e-6
+        if u_qp is not None and np.all(A @ u_qp + b >= np.minimum(b, 0.0) - tol):
+            return u_qp
+        cfg = self.config
+        out = np.zeros(3)
+        nw = np.flatnonzero(kind != 2)
+        if nw.size:
+            k = nw[np.argmin(b[nw])]
+            phi = math.atan2(-A[k, 1], -A[k, 0])
+            gain = self.params.look_gain if self.params.look_gain > 0 else 3.0
+            out[2] = min(max(gain * phi, -cfg.omega_max_radps), cfg.omega_max_radps)
+        return out
+
     def solve(
         self,
         u_star: np.ndarray,
@@ -251,6 +404,8 @@ class FovCbfController:
         v_est_body: np.ndarray,
         d: np.ndarray,
         ids: np.ndarray | None = None,
+        safety: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        detected: np.ndarray | None = None,
     ) -> ControlResult:
         """Safe input closest to u* (Eq. 19) under the hierarchy of Eq. 18.
 
@@ -261,6 +416,13 @@ class FovCbfController:
             v_est_body: ``(M, 2)`` neighbour velocity estimates ⁱv_j^est (m/s), Eq. 20/22.
             d: ``(M,)`` distances d_ij to the neighbours' confidence ellipses (m, 0 inside).
             ids: ``(M,)`` neighbour IDs, used only to break ties in d (default: order).
+            safety: the robot's collision rows ``(A (K, 3), b (K,) m/s, kind (K,))`` of
+                :func:`fov_marl.control.safety.safety_rows` (``A u + b ≥ 0``). With
+                ``params.safety_model == "ellipse"`` they replace Eq. 12 row 3 in the
+                safety level (None: rows from ``p_body`` taken as exact); ignored with
+                ``"mean"``.
+            detected: ``(M,)`` bool, neighbours in the last camera report (None: all),
+                for ``params.search_by_turning`` (see :func:`~fov_marl.control.cbf.cbf_rows`).
 
         Returns:
             :class:`ControlResult`. Non-finite inputs and solver failures give a
@@ -315,13 +477,18 @@ class FovCbfController:
         n_cone = self._cone_b.shape[0] if M else 0  # alone, there is no one to run into
         if n_cone and p.look_gain > 0.0:
             u_star = self.look_where_you_go(u_star)
-        rows = cbf_rows(p_body, v_est_body, d, cfg, p, self.h_max, u_star[:2])
+        rows = cbf_rows(p_body, v_est_body, d, cfg, p, self.h_max, u_star[:2], detected)
         At, bt, _ = normalise_rows(rows.A, rows.b, cfg.v_max_mps, cfg.omega_max_radps, p.row_clip)
         active = bt < 1.0 if p.prune else np.isfinite(rows.h)
-        u_proj = self.qp.project(u_star)
+        sA, sb, sk = self._safety_rows(safety, p_body, v_est_body)
+        if p.safety_model == "ellipse":
+            active[:, SAFETY_ROW] = False
+        u_proj = self._project(u_star)
         st = self.stats
-        if not active.any() and (
-            n_cone == 0 or (self._cone_A @ u_proj + self._cone_b).min() >= 0.0
+        if (
+            not active.any()
+            and sb.size == 0
+            and (n_cone == 0 or (self._cone_A @ u_proj + self._cone_b).min() >= 0.0)
         ):  # every row holds for every admissible input, and u* is inside the cone
             return ControlResult(
                 u=u_proj,
@@ -350,20 +517,34 @@ class FovCbfController:
             A_q = np.concatenate([A_q, self._cone_A])
             b_q = np.concatenate([b_q, self._cone_b])
             l_q = np.concatenate([l_q, np.full(n_cone, l_cone, dtype=l_q.dtype)])
-        qres = self.qp.solve(A_q, b_q, l_q, u_star)
+        n_fov = b_q.shape[0]
+        if sb.size:
+            l_s = -1 if p.safety_hard else 0
+            A_q = np.concatenate([A_q, sA])
+            b_q = np.concatenate([b_q, sb])
+            l_q = np.concatenate([l_q, np.full(sb.size, l_s, dtype=l_q.dtype)])
+        qres = self._qp_solve(A_q, b_q, l_q, u_star)
+        if sb.size and p.deadlock_turn_deg > 0.0:
+            qres = self._unblock(qres, A_q, b_q, l_q, u_star, n_fov)
         kappa[jj, rr] = qres.kappa[: jj.size]
         u = qres.u
-        du = u - (u_proj if u_star is u_given else self.qp.project(u_given))
+        status, fallback = qres.status, qres.fallback
+        safety_kappa = float(qres.kappa[n_fov:].max(initial=0.0))
+        if sb.size and (safety_kappa > _KAPPA_SAFETY or qres.status == "qp_failed"):
+            u = self._safe_fallback(None if qres.status == "qp_failed" else u, sA, sb, sk)
+            status, fallback = "safety_fallback", True
+            st["safety_fallbacks"] += 1
+        du = u - (u_proj if u_star is u_given else self._project(u_given))
         intervened = bool(math.sqrt(float(du @ du)) > p.intervention_tol)
         st["qp_solves"] += qres.n_qp
-        st["fallbacks"] += int(qres.fallback)
+        st["fallbacks"] += int(fallback)
         st["interventions"] += int(intervened)
         st["relaxed"] += int(qres.status == "relaxed")
         return ControlResult(
             u=u,
             u_star=u_given,
-            status=qres.status,
-            fallback=qres.fallback,
+            status=status,
+            fallback=fallback,
             intervened=intervened,
             kappa=kappa,
             active=active,
@@ -371,8 +552,8 @@ class FovCbfController:
             n_levels=qres.n_levels,
             n_qp=qres.n_qp,
             qp_status=qres.qp_status,
-            safety_violation=float(kappa[:, SAFETY_ROW].max(initial=0.0)),
-            cone_violation=float(qres.kappa[jj.size :].max(initial=0.0)),
+            safety_violation=max(float(kappa[:, SAFETY_ROW].max(initial=0.0)), safety_kappa),
+            cone_violation=float(qres.kappa[jj.size : n_fov].max(initial=0.0)),
             timings={
                 "rows": t1 - t0,
                 "cascade": qres.t_cascade_s,

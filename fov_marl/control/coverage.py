@@ -346,9 +346,33 @@ def coverage_desired_inputs(
     empty = ~(mass > params.lloyd_min_mass) | ~np.all(np.isfinite(cen), axis=1)
     goal = np.where(empty[:, None], np.asarray(config.density_mean_m)[None, :], cen)
     d = goal - poses[:, :2]
+    d = d * lloyd_deadband_scale(np.hypot(d[:, 0], d[:, 1]), params)[:, None]
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
     g_body = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], -1)
     return DesiredInput(proportional_input(g_body, config, params), goal, mass, empty)
+
+
+def lloyd_deadband_scale(dist_m: np.ndarray, params: ControllerParams) -> np.ndarray:
+    """Shrinkage of the Lloyd error by the dead band δ = ``params.lloyd_deadband_m``.
+
+    The goal error ``e = c − p`` becomes ``e · max(0, 1 − δ / ‖e‖)``: continuous, 0
+    within δ of the centroid, ``‖e‖ − δ`` long outside. Not in the paper: the
+    centroid is computed on the neighbours' *estimates*, whose noise (σ ≈ 0.3 m for a
+    seen neighbour under Σ_MEAS) moves it by ~0.1-0.2 m from step to step; without the
+    band a team at 120° never settles (measured, N = 6: mean speed over the last 50 s
+    0.10-0.22 m/s, against 0.00 for the ``ideal`` baseline). δ = 0 is the paper's law.
+
+    Args:
+        dist_m: ``(...)`` ‖e‖ (m).
+
+    Returns:
+        ``(...)`` factors in [0, 1].
+    """
+    d = np.asarray(dist_m, dtype=np.float64)
+    band = params.lloyd_deadband_m
+    if band <= 0.0:
+        return np.ones_like(d)
+    return np.maximum(0.0, 1.0 - band / np.maximum(d, 1e-300))
 
 
 def coverage_desired_input(
@@ -380,6 +404,8 @@ def coverage_desired_input(
     empty = not (m > params.lloyd_min_mass) or not bool(np.all(np.isfinite(cen)))
     goal = np.asarray(config.density_mean_m, dtype=np.float64) if empty else cen[0]
     dx, dy = goal[0] - x, goal[1] - y
+    f = float(lloyd_deadband_scale(math.hypot(dx, dy), params))
+    dx, dy = f * dx, f * dy
     gx, gy = c * dx + s * dy, -s * dx + c * dy
     # proportional_input for one goal, in scalar arithmetic (same formulas)
     dist = math.hypot(gx, gy)

@@ -38,6 +38,42 @@ field                        default   source / reason
 ``fov_margin_m``             0.05      the FoV rows keep j this far inside the sector
                                        borders and range (absorbs the discrete-time
                                        overshoot of the continuous-time CBF)
+``safety_model``             ellipse   ``"ellipse"``: collision rows on the uncertainty,
+                                       in discrete time, shared, with blind and wall rows
+                                       (:mod:`~fov_marl.control.safety`), replacing Eq. 12
+                                       row 3; ``"mean"``: the paper's row 3 on the mean
+                                       (ablation). Measured with ``"mean"``: collisions
+                                       from N = 12 (pfcbf) and for two robots head-on
+                                       behind the filter
+``safety_risk``              0.01      δ, one-sided risk of each neighbour row: the
+                                       separating line sits z = Φ⁻¹(1 − δ) = 2.33 σ_n in
+                                       front of the mean (chance constraint, ref. [12])
+``safety_gain``              1.0       γ (1/s) of the discrete-time barrier
+                                       ``h_{k+1} ≥ (1 − γ dt) h_k`` on the metric rows
+                                       (h in m); γ dt ≤ 1 is checked
+``safety_hold_band_m``       0.3       b: neighbour rows approach only beyond D_s + b,
+                                       hold within the band, retreat below D_s
+                                       (:func:`~fov_marl.control.safety.hold_band`): no
+                                       approach/retreat chatter on the estimate's noise
+``responsibility``           0.5       ρ, share of the pair's admissible closing each
+                                       robot takes (both run the same rows)
+``blind_bins``               16        K bearing sectors of the blind rows (speed bound
+                                       per direction from undetected neighbours'
+                                       particles); 0 disables them
+``blind_risk``               0.01      expected neighbours per sector tolerated closer
+                                       than the sector's representative particle
+``walls``                    True      arena walls as rows (the commanded velocity is the
+                                       one the robot gets; no sliding)
+``wall_gain``                2.5       γ_w (1/s) of the wall rows, γ_w dt ≤ 1
+``deadlock_turn_deg``        60.0      "keep right" when the collision rows block u*
+                                       (:meth:`~fov_marl.control.controller.
+                                       FovCbfController._unblock`): four crossing robots
+                                       otherwise stop for good at the centre (VII-D,
+                                       seed 0); 0 disables (the safety filter's default)
+``omega_weight``             1.0       λ: Eq. 18-19 minimise ``‖Δv‖² + λ² Δω²``
+                                       (λ in s·m/rad... i.e. 1 rad/s of turning costs as
+                                       much as λ m/s of translation); 1 is the paper's
+                                       ``‖u − u*‖²``
 ``safety_first``             True      the safety rows of every neighbour form one level
                                        above all FoV levels (False: the paper's per-
                                        neighbour levels, see :mod:`~fov_marl.control.
@@ -63,6 +99,12 @@ field                        default   source / reason
                                        into a neighbour (seed 18, 0.94 m; 20 seeds now
                                        ≥ 2.27 m). c < 1 leaves ``(1 − c)`` of the turn
                                        rate to spare
+``fov_translation``          "none"    which FoV rows keep their translation terms
+                                       (:func:`~fov_marl.control.cbf.cbf_rows`): "all"
+                                       (paper, Eq. 17), "seen" (detected neighbours'),
+                                       "none" (the camera is kept on neighbours by
+                                       turning; translation is u*'s, bounded by the
+                                       collision rows): the team at 120° settles
 ``motion_cone``              False     "look where you go" (not in the paper): a level right
                                        below the safety rows keeps planar speed ≤
                                        ``blind_speed_mps`` outside ±``cone_half_angle_deg``
@@ -75,9 +117,10 @@ field                        default   source / reason
                                        otherwise drive robots blind into neighbours
 ``cone_half_angle_deg``      20.0      a, half-angle of the full-speed cone (capped at β/2);
                                        at 30° off axis 0.22 m/s remain, at 45° 0.11 m/s
-``blind_speed_mps``          0.05      v_b, speed allowed in every direction under the
-                                       cone: two robots blind to each other close in at
-                                       ≤ ~0.1 m/s (0.15 m/s let such pairs collide)
+``blind_speed_mps``          0.05      v_b: floor of the blind rows (a robot may always
+                                       creep at v_b towards where an unseen neighbour may
+                                       be, never faster) and the speed allowed in every
+                                       direction under the motion cone
 ``look_gain``                3.0       with the cone: a u* translating outside the
                                        full-speed cone gets ``ω* = sat(look_gain · φ)``,
                                        φ its bearing, so the robot turns to see where it
@@ -107,6 +150,10 @@ field                        default   source / reason
 ``face_distance_m``          0.5       below this distance to the goal, ω fades to 0
 ``lloyd_grid_m``             0.4       Lloyd stencil spacing (see
                                        :func:`~fov_marl.control.benchmark.bench_lloyd_resolution`)
+``lloyd_deadband_m``         0.3       Lloyd dead band (not in the paper): the robot
+                                       stops within 0.3 m of its estimated centroid
+                                       (:func:`~fov_marl.control.coverage.
+                                       lloyd_deadband_scale`); 0 is the paper's law
 ``lloyd_min_mass``           1e-9      cell mass under φ below which u* heads for q_m
 ===========================  ========  ===============================================
 """
@@ -143,12 +190,27 @@ class ControllerParams:
         slack_slope: s of ``ε = h_max σ(s (d − 3 D_s))`` (1/m), (0, 100].
         slack_zero_below_ds: shift and rescale the sigmoid so ε(D_s) = 0 exactly.
         fov_margin_m: inward margin of the FoV rows (m), in [0, 1].
+        safety_model: ``"ellipse"`` (rows of :mod:`fov_marl.control.safety`) or
+            ``"mean"`` (Eq. 12 row 3 on the mean, the paper's).
+        safety_risk: δ in (0, 0.5), one-sided risk of each neighbour row.
+        safety_gain: γ (1/s) of the discrete-time barrier on the metric rows, (0, 1e3].
+        safety_hold_band_m: b in [0, 10] (m), the hold band of the neighbour rows.
+        responsibility: ρ in (0, 1], share of the admissible closing per robot.
+        blind_bins: K in [0, 360] bearing sectors of the blind rows (0: none).
+        blind_risk: expected neighbours per sector tolerated, in [0, 1).
+        walls: add the arena walls as rows.
+        wall_gain: γ_w (1/s) of the wall rows, (0, 1e3].
+        deadlock_turn_deg: turn of u*'s translation (degrees, to the right) tried when
+            the collision rows block it, in [0, 180]; 0 disables.
+        omega_weight: λ in (0, 10], weight of the yaw rate in the QP metric.
         safety_first: all safety rows form the top cascade level.
         safety_hard: safety rows are hard constraints (no κ); infeasible → brake.
         safety_speed_margin_mps: δv ≥ 0, the safety row is made robust to an error of
             norm ≤ δv in the neighbour's velocity estimate (m/s), [0, 100].
         fov_recovery_cap: c in [0, 1]; FoV rows out of view recover by rotation only,
             demanding at most ``c |A_ω| ω_max`` (0: the paper's rows).
+        fov_translation: ``"all"``, ``"seen"`` or ``"none"``: FoV rows that keep
+            their translation terms.
         motion_cone: add the "look where you go" level below the safety rows.
         cone_half_angle_deg: half-angle of the full-speed cone, (0, 179] degrees.
         blind_speed_mps: speed allowed outside the cone (m/s), [0, 100].
@@ -171,6 +233,7 @@ class ControllerParams:
         k_omega: gain of the facing law (1/s), (0, 100].
         face_distance_m: distance to the goal below which ω fades linearly to 0, (0, 100].
         lloyd_grid_m: spacing of the Lloyd quadrature stencil (m), (0, 2].
+        lloyd_deadband_m: dead band of the Lloyd law around the centroid (m), [0, 100].
         lloyd_min_mass: probability mass of the cell under φ below which the robot heads
             for q_m instead of the centroid, in [0, 1).
     """
@@ -182,10 +245,22 @@ class ControllerParams:
     slack_slope: float = 1.0
     slack_zero_below_ds: bool = True
     fov_margin_m: float = 0.05
+    safety_model: str = "ellipse"
+    safety_risk: float = 0.01
+    safety_gain: float = 1.0
+    safety_hold_band_m: float = 0.3
+    responsibility: float = 0.5
+    blind_bins: int = 16
+    blind_risk: float = 0.01
+    walls: bool = True
+    wall_gain: float = 2.5
+    deadlock_turn_deg: float = 60.0
+    omega_weight: float = 1.0
     safety_first: bool = True
     safety_hard: bool = False
     safety_speed_margin_mps: float = 0.0
     fov_recovery_cap: float = 0.8
+    fov_translation: str = "none"
     motion_cone: bool = False
     cone_half_angle_deg: float = 20.0
     blind_speed_mps: float = 0.05
@@ -204,6 +279,7 @@ class ControllerParams:
     k_omega: float = 1.0
     face_distance_m: float = 0.5
     lloyd_grid_m: float = 0.4
+    lloyd_deadband_m: float = 0.3
     lloyd_min_mass: float = 1e-9
 
     def __post_init__(self) -> None:
@@ -223,9 +299,32 @@ class ControllerParams:
             "safety_hard",
             "prune",
             "motion_cone",
+            "walls",
         ):
             _check_bool(name, getattr(self, name))
         _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)
+        if self.fov_translation not in ("all", "seen", "none"):
+            raise ConfigError(
+                "fov_translation must be one of ('all', 'seen', 'none'), "
+                f"got {self.fov_translation!r}"
+            )
+        if self.safety_model not in ("ellipse", "mean"):
+            raise ConfigError(
+                f"safety_model must be one of ('ellipse', 'mean'), got {self.safety_model!r}"
+            )
+        _check("safety_risk", self.safety_risk, 0.0, 0.5, lo_open=True)
+        if self.safety_risk >= 0.5:
+            raise ConfigError(f"safety_risk must be in (0.0, 0.5), got {self.safety_risk!r}")
+        _check("safety_gain", self.safety_gain, 0.0, 1e3, lo_open=True)
+        _check("responsibility", self.responsibility, 0.0, 1.0, lo_open=True)
+        _check("safety_hold_band_m", self.safety_hold_band_m, 0.0, 10.0)
+        _check_int("blind_bins", self.blind_bins, 0, 360)
+        _check("blind_risk", self.blind_risk, 0.0, 1.0)
+        if self.blind_risk >= 1.0:
+            raise ConfigError(f"blind_risk must be in [0.0, 1.0), got {self.blind_risk!r}")
+        _check("wall_gain", self.wall_gain, 0.0, 1e3, lo_open=True)
+        _check("deadlock_turn_deg", self.deadlock_turn_deg, 0.0, 180.0)
+        _check("omega_weight", self.omega_weight, 0.0, 10.0, lo_open=True)
         _check("safety_speed_margin_mps", self.safety_speed_margin_mps, 0.0, 100.0)
         _check("cone_half_angle_deg", self.cone_half_angle_deg, 0.0, 179.0, lo_open=True)
         _check("blind_speed_mps", self.blind_speed_mps, 0.0, 100.0)
@@ -247,6 +346,7 @@ class ControllerParams:
         _check("k_omega", self.k_omega, 0.0, 100.0, lo_open=True)
         _check("face_distance_m", self.face_distance_m, 0.0, 100.0, lo_open=True)
         _check("lloyd_grid_m", self.lloyd_grid_m, 0.0, 2.0, lo_open=True)
+        _check("lloyd_deadband_m", self.lloyd_deadband_m, 0.0, 100.0)
         _check("lloyd_min_mass", self.lloyd_min_mass, 0.0, 1.0)
         if self.lloyd_min_mass >= 1.0:
             raise ConfigError(f"lloyd_min_mass must be in [0, 1), got {self.lloyd_min_mass!r}")

@@ -77,10 +77,7 @@ __all__ = ["SafetyFilterWrapper", "FILTER_CONTROLLER_DEFAULTS"]
 
 #: Controller settings of the filter that differ from :class:`ControllerParams`'s
 #: defaults (module docstring); ``controller_params`` dicts are applied on top.
-FILTER_CONTROLLER_DEFAULTS: dict[str, Any] = {
-    "motion_cone": True,
-    "safety_speed_margin_mps": 0.5,
-}
+FILTER_CONTROLLER_DEFAULTS: dict[str, Any] = {"deadlock_turn_deg": 0.0}
 
 
 class SafetyFilterWrapper(BaseParallelWrapper):

@@ -50,11 +50,14 @@ def test_random_instances_give_finite_admissible_inputs(fov, seed):
         u_star, p, v, d = _random_instance(rng, int(rng.integers(1, 20)))
         res = ctrl.solve(u_star, p, v, d)
         assert np.all(np.isfinite(res.u)) and _admissible(res.u)
-        assert res.status in ("unconstrained", "solved", "relaxed")
-        assert not res.fallback
+        # random neighbours may sit inside D_s on all sides: the collision rows then
+        # cannot all be met and the documented safe fallback is the only fallback
+        assert res.status in ("unconstrained", "solved", "relaxed", "safety_fallback")
+        assert res.fallback == (res.status == "safety_fallback")
         assert res.kappa.shape == p.shape[:1] + (4,)
         assert np.all(res.kappa[~res.active] == 0)
-    assert ctrl.stats["steps"] == 20 and ctrl.stats["fallbacks"] == 0
+    assert ctrl.stats["steps"] == 20
+    assert ctrl.stats["fallbacks"] == ctrl.stats["safety_fallbacks"]
 
 
 @pytest.mark.parametrize("seed", range(15))
@@ -145,15 +148,34 @@ def _squeeze():
 
 
 def test_infeasible_hard_safety_rows_brake_and_are_counted():
-    ctrl = FovCbfController(CFG, ControllerParams(safety_hard=True))
+    """The paper's mean-based row 3 (``safety_model="mean"``), hard: infeasible → brake."""
+    ctrl = FovCbfController(CFG, ControllerParams(safety_hard=True, safety_model="mean"))
     res = ctrl.solve(*_squeeze())
     assert res.status == "qp_failed" and res.fallback
     np.testing.assert_array_equal(res.u, np.zeros(3))
     assert ctrl.stats["fallbacks"] == 1
 
 
+@pytest.mark.parametrize("hard", [False, True])
+def test_infeasible_collision_rows_take_the_safe_fallback(hard):
+    """Squeezed between two neighbours inside D_s: the rows of the uncertainty cannot be met;
+    the fallback closes on neither neighbour (no motion along ±y, where they are); counted.
+    With the rows as hard constraints the QP has no solution: the robot stops translating
+    and turns towards a neighbour."""
+    ctrl = FovCbfController(CFG, ControllerParams(safety_hard=hard))
+    res = ctrl.solve(*_squeeze())
+    assert res.status == "safety_fallback" and res.fallback
+    assert ctrl.stats["safety_fallbacks"] == 1 and ctrl.stats["fallbacks"] == 1
+    assert abs(res.u[1]) < 1e-6
+    if hard:
+        np.testing.assert_array_equal(res.u[:2], np.zeros(2))
+        assert abs(res.u[2]) == pytest.approx(CFG.omega_max_radps)  # neighbours at ±90°
+    else:
+        assert res.safety_violation > 0
+
+
 def test_infeasible_safety_level_is_relaxed_when_soft():
-    ctrl = FovCbfController(CFG)
+    ctrl = FovCbfController(CFG, ControllerParams(safety_model="mean"))
     res = ctrl.solve(*_squeeze())
     assert res.status == "relaxed" and not res.fallback
     assert res.safety_violation > 0
@@ -329,7 +351,7 @@ def test_motion_cone_yields_to_the_safety_rows():
 
 def test_motion_cone_levels_and_reporting():
     """The cone is level 1 (FoV levels shift below it); no cone without neighbours or at 360°."""
-    prm = ControllerParams(motion_cone=True, prune=False)
+    prm = ControllerParams(motion_cone=True, prune=False, safety_model="mean")
     ctrl = FovCbfController(CFG, prm)
     res = ctrl.solve(
         np.array([0.0, 1.0, 0.0]), np.array([[4.0, 0.5]]), np.zeros((1, 2)), np.zeros(1)

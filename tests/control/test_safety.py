@@ -1,0 +1,289 @@
+"""Collision rows on the uncertainty (fov_marl.control.safety): kernels against slow
+references, and the physical properties they promise (discrete time, walls, sharing)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fov_marl.config import make_config
+from fov_marl.control import ControllerParams, FovCbfController
+from fov_marl.control.safety import (
+    ROW_BLIND,
+    ROW_NEIGHBOUR,
+    ROW_WALL,
+    arc_margin,
+    blind_representatives,
+    hold_band,
+    neighbour_halfplanes,
+    risk_quantile,
+    safety_rows,
+    wall_clearances,
+)
+from fov_marl.geometry import integrate_unicycle, world_to_body
+
+CFG = make_config()
+
+
+def _rows(**kw):
+    p = ControllerParams()
+    base = dict(
+        mean_body=np.zeros((1, 0, 2)),
+        cov_body=np.zeros((1, 0, 2, 2)),
+        detected=np.zeros((1, 0), dtype=bool),
+        pose_world=None,
+        particles_body=None,
+        particle_mass=None,
+        safety_distance_m=CFG.safety_distance_m,
+        v_max_mps=CFG.v_max_mps,
+        omega_max_radps=CFG.omega_max_radps,
+        dt_s=CFG.dt_s,
+        arena_size_m=CFG.arena_size_m,
+        robot_radius_m=CFG.robot_radius_m,
+        safety_risk=p.safety_risk,
+        safety_gain=p.safety_gain,
+        responsibility=p.responsibility,
+        blind_bins=p.blind_bins,
+        blind_risk=p.blind_risk,
+        blind_speed_mps=p.blind_speed_mps,
+        walls=True,
+        wall_gain=p.wall_gain,
+        hold_band_m=p.safety_hold_band_m,
+    )
+    base.update(kw)
+    return safety_rows(**base)
+
+
+def test_arc_margin_bounds_the_exact_unicycle_displacement():
+    rng = np.random.default_rng(0)
+    v = rng.uniform(-1, 1, (20000, 2))
+    v *= np.minimum(1.0, 1.0 / np.linalg.norm(v, axis=1))[:, None]
+    w = rng.uniform(-CFG.omega_max_radps, CFG.omega_max_radps, 20000)
+    new = integrate_unicycle(np.zeros((20000, 3)), v, w, CFG.dt_s)
+    dev = np.linalg.norm(new[:, :2] - v * CFG.dt_s, axis=1)
+    m = arc_margin(CFG.v_max_mps, CFG.omega_max_radps, CFG.dt_s)
+    assert dev.max() <= m + 1e-12
+    assert dev.max() > 0.95 * m  # tight
+    assert m == pytest.approx(0.0299, abs=1e-3)
+    assert arc_margin(1.0, 0.0, 0.2) == 0.0
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.floats(2.0, 15.0),
+    st.floats(-math.pi, math.pi),
+    st.floats(0.05, 2.0),
+    st.floats(0.05, 2.0),
+    st.floats(-math.pi, math.pi),
+)
+def test_neighbour_line_holds_the_stated_probability(r, bearing, s1, s2, rot):
+    """j ~ N(μ, Σ) lies beyond the separating line with probability 1 − δ (Monte Carlo)."""
+    mu = r * np.array([math.cos(bearing), math.sin(bearing)])
+    R = np.array([[math.cos(rot), -math.sin(rot)], [math.sin(rot), math.cos(rot)]])
+    S = R @ np.diag([s1**2, s2**2]) @ R.T
+    delta = 0.05
+    n, s = neighbour_halfplanes(mu[None, None], S[None, None], risk_quantile(delta))
+    x = np.random.default_rng(1).multivariate_normal(mu, S, 40000)
+    frac_near = np.mean(x @ n[0, 0] < s[0, 0])
+    assert abs(frac_near - delta) < 0.01
+    # the line never cuts the robot's side beyond the mean's distance
+    assert s[0, 0] <= r + 1e-12
+
+
+def _blind_reference(p, mass, K, risk, r_cut):
+    R = p.shape[0]
+    rep = np.zeros((R, K, 2))
+    found = np.zeros((R, K), bool)
+    for i in range(R):
+        for k in range(K):
+            cand = []
+            for q, m in zip(p[i], mass[i], strict=True):
+                r = math.hypot(*q)
+                if m <= 0 or r >= r_cut:
+                    continue
+                b = min(int((math.atan2(q[1], q[0]) + math.pi) * K / (2 * math.pi)), K - 1)
+                if b == k:
+                    cand.append((r, m, q))
+            cand.sort(key=lambda c: c[0])
+            acc = 0.0
+            for r, m, q in cand:
+                acc += m
+                if acc > risk + 1e-9:
+                    rep[i, k] = q
+                    found[i, k] = True
+                    break
+    return rep, found
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000), st.integers(1, 24), st.floats(0.0, 0.05))
+def test_blind_representatives_match_the_reference(seed, K, risk):
+    rng = np.random.default_rng(seed)
+    R, P = 3, 60
+    p = rng.normal(0, 4.0, (R, P, 2))
+    mass = rng.choice([0.0, 1 / 30, 1 / 60], (R, P))
+    rep, found = blind_representatives(p, mass, K, risk, 8.0)
+    rep_r, found_r = _blind_reference(p, mass, K, risk, 8.0)
+    np.testing.assert_array_equal(found, found_r)
+    np.testing.assert_allclose(rep, rep_r)
+
+
+def test_wall_normals_point_out_of_the_arena_in_the_body_frame():
+    pose = np.array([[0.6, 20.0, 0.7], [20.0, 39.2, -2.0]])
+    n_body, w = wall_clearances(pose, 40.0, 0.5)
+    np.testing.assert_allclose(w[0], [0.1, 38.9, 19.5, 19.5])
+    np.testing.assert_allclose(w[1, 3], 0.3)
+    for k in range(2):
+        for j in range(4):
+            # moving along n_body by the clearance reaches the projection line exactly
+            step = n_body[k, j] * w[k, j]
+            c, s = math.cos(pose[k, 2]), math.sin(pose[k, 2])
+            world = pose[k, :2] + np.array([c * step[0] - s * step[1], s * step[0] + c * step[1]])
+            on_line = [world[0] - 0.5, 39.5 - world[0], world[1] - 0.5, 39.5 - world[1]][j]
+            assert on_line == pytest.approx(0.0, abs=1e-9)
+
+
+def test_hold_band_is_a_dead_zone():
+    h = np.array([-1.0, -0.1, 0.0, 0.1, 0.3, 0.5])
+    np.testing.assert_allclose(hold_band(h, 0.3), [-1.0, -0.1, 0.0, 0.0, 0.0, 0.2])
+    np.testing.assert_array_equal(hold_band(h, 0.0), h)
+
+
+def test_rows_of_a_detected_and_an_undetected_neighbour():
+    """Detected: retreat when too close. Undetected: never approach, never pushed away;
+    a band covering the robot gives no row."""
+    mean = np.array([[[1.9, 0.0], [0.0, 1.9], [-3.0, 0.0]]])
+    cov = np.zeros((1, 3, 2, 2))
+    cov[0, 2] = np.eye(2) * 4.0  # wide: the band covers the robot
+    det = np.array([[True, False, False]])
+    rows = _rows(mean_body=mean, cov_body=cov, detected=det, blind_bins=0, walls=False)
+    A, b, kind = rows.robot(0)
+    assert list(kind) == [ROW_NEIGHBOUR, ROW_NEIGHBOUR]
+    np.testing.assert_allclose(A[0], [-1.0, 0.0, 0.0])
+    assert b[0] < 0  # 1.9 m < D_s: retreat along −x
+    np.testing.assert_allclose(A[1], [0.0, -1.0, 0.0], atol=1e-12)
+    assert b[1] == 0.0  # undetected, too close: hold
+
+
+def test_blind_rows_slow_the_robot_only_towards_unseen_particles():
+    """A cloud of an undetected neighbour 3 m behind: moving back is bounded, forward free."""
+    rng = np.random.default_rng(0)
+    cloud = rng.normal([-3.0, 0.0], 0.2, (400, 2))
+    rows = _rows(
+        mean_body=np.array([[[-3.0, 0.0]]]),
+        cov_body=np.full((1, 1, 2, 2), 0.0) + np.eye(2) * 25.0,  # wide: no neighbour row
+        detected=np.array([[False]]),
+        particles_body=cloud[None],
+        particle_mass=np.full((1, 400), 1 / 400),
+        walls=False,
+    )
+    A, b, kind = rows.robot(0)
+    assert set(kind.tolist()) == {ROW_BLIND}
+    back = A @ np.array([-1.0, 0.0, 0.0]) + b
+    ahead = A @ np.array([1.0, 0.0, 0.0]) + b
+    side = A @ np.array([0.0, 1.0, 0.0]) + b
+    assert back.min() < 0 and ahead.min() >= 0 and side.min() >= -0.3
+
+
+def _drive(ctrl_params, start_world, u_fn, steps, neighbours_world, v_nb=(0.0, 0.0)):
+    """Integrate one controlled robot against exact, possibly moving point neighbours."""
+    ctrl = FovCbfController(CFG, ctrl_params)
+    pose = np.array(start_world, dtype=np.float64)
+    nb = np.array(neighbours_world, dtype=np.float64)
+    dmin = np.inf
+    poses = []
+    for _ in range(steps):
+        p_body = world_to_body(nb, pose)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        v_body = np.tile([c * v_nb[0] + s * v_nb[1], -s * v_nb[0] + c * v_nb[1]], (len(nb), 1))
+        res = ctrl.solve(u_fn(pose), p_body, v_body, np.hypot(*p_body.T))
+        pose = integrate_unicycle(pose, res.u[:2], res.u[2], CFG.dt_s)
+        nb = nb + np.asarray(v_nb) * CFG.dt_s
+        dmin = min(dmin, float(np.min(np.linalg.norm(nb - pose[:2], axis=1))))
+        poses.append(pose.copy())
+    return dmin, np.array(poses)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    st.floats(-math.pi, math.pi),
+    st.floats(-1.0, 1.0),
+    st.floats(-1.0, 1.0),
+    st.floats(-1.0, 1.0),
+    st.floats(2.6, 8.0),
+)
+def test_discrete_time_distance_never_below_ds_to_a_known_static_neighbour(yaw, vx, vy, w, dist):
+    """Any constant u* (here spinning too): the exact-position rows keep D_s in discrete time."""
+    u = np.array([vx, vy, w * CFG.omega_max_radps])
+    dmin, _ = _drive(ControllerParams(), (20.0, 20.0, yaw), lambda _: u, 80, [(20.0 + dist, 20.0)])
+    assert dmin >= CFG.safety_distance_m - 1e-9
+
+
+def test_a_neighbour_predicted_to_charge_is_answered_in_full():
+    """j drives at the robot at 0.8 m/s (its estimated velocity): the robot backs off and
+    keeps D_s on its own, not only its share."""
+    dmin, _ = _drive(
+        ControllerParams(), (20.0, 20.0, 0.0), lambda _: np.zeros(3), 60, [(26.0, 20.0)], (-0.8, 0)
+    )
+    assert dmin >= CFG.safety_distance_m - 0.02
+
+
+def test_wall_rows_stop_the_robot_at_the_wall_instead_of_sliding():
+    """u* pushes 45° into the wall: the robot moves along it, never into the projection."""
+    prm = ControllerParams()
+    ctrl = FovCbfController(CFG, prm)
+    pose = np.array([20.0, 38.0, 0.0])
+    lo, hi = CFG.robot_radius_m, CFG.arena_size_m - CFG.robot_radius_m
+    for _ in range(60):
+        rows = _rows(pose_world=pose[None], blind_bins=0)
+        u_star = np.array([0.7, 0.7, 0.0])  # body = world here (yaw 0): 45° into y = L
+        res = ctrl.solve(
+            u_star, np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), None, rows.robot(0)
+        )
+        new = integrate_unicycle(pose, res.u[:2], res.u[2], CFG.dt_s)
+        assert new[1] <= hi + 1e-9 and new[0] <= hi  # the env's projection is never needed
+        pose = new
+    assert pose[1] > hi - 0.1  # it got to the wall
+    assert pose[0] > 26.0  # and kept moving along it
+    assert lo < pose[0]
+
+
+def test_pair_running_the_same_rows_shares_the_budget():
+    """Two controllers head-on with exact mutual positions: they meet no closer than D_s and
+    each spends about half of the closing (symmetric stop)."""
+    ca, cb = FovCbfController(CFG), FovCbfController(CFG)
+    pa, pb = np.array([15.0, 20.0, 0.0]), np.array([25.0, 20.0, math.pi])
+    fwd = np.array([1.0, 0.0, 0.0])
+    for _ in range(80):
+        ra = ca.solve(fwd, world_to_body(pb[None, :2], pa), np.zeros((1, 2)), np.ones(1))
+        rb = cb.solve(fwd, world_to_body(pa[None, :2], pb), np.zeros((1, 2)), np.ones(1))
+        pa = integrate_unicycle(pa, ra.u[:2], ra.u[2], CFG.dt_s)
+        pb = integrate_unicycle(pb, rb.u[:2], rb.u[2], CFG.dt_s)
+        assert np.linalg.norm(pa[:2] - pb[:2]) >= CFG.safety_distance_m
+    assert abs((pa[0] - 15.0) - (25.0 - pb[0])) < 0.05
+    assert np.linalg.norm(pa[:2] - pb[:2]) < CFG.safety_distance_m + 0.5  # and they got close
+
+
+def test_rows_shapes_and_padding():
+    rng = np.random.default_rng(2)
+    R, M, P = 4, 3, 90
+    rows = _rows(
+        mean_body=rng.normal(0, 5, (R, M, 2)),
+        cov_body=np.tile(np.eye(2) * 0.1, (R, M, 1, 1)),
+        detected=rng.random((R, M)) < 0.5,
+        pose_world=np.column_stack([rng.uniform(1, 39, (R, 2)), rng.uniform(-3, 3, R)]),
+        particles_body=rng.normal(0, 4, (R, P, 2)),
+        particle_mass=np.full((R, P), 1 / 30),
+    )
+    K = M + ControllerParams().blind_bins + 4
+    assert rows.A.shape == (R, K, 3) and rows.b.shape == (R, K) and rows.kind.shape == (R, K)
+    assert np.all(rows.A[..., 2] == 0.0)
+    pad = rows.kind < 0
+    assert np.all(np.isinf(rows.b[pad]))
+    assert np.all(rows.kind[:, -4:] == ROW_WALL)
+    real = ~pad
+    np.testing.assert_allclose(np.linalg.norm(rows.A[real][:, :2], axis=1), 1.0)
