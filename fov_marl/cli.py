@@ -308,7 +308,7 @@ def run_render(args: argparse.Namespace) -> Path:
     env_kwargs = _check_config(args, None)
     steps = make_config(scenario=args.scenario, **env_kwargs).max_cycles
     frames = -(-steps // args.every)
-    if out.suffix.lower() != ".png" and frames > MAX_RENDER_FRAMES:
+    if frames > MAX_RENDER_FRAMES:  # render_episode keeps them all, even for a .png
         raise CliError(
             f"--every {args.every}: an episode of {steps} steps keeps {frames} frames in "
             f"memory (640 x 640 RGB each); at most {MAX_RENDER_FRAMES}: raise --every to "

@@ -388,6 +388,8 @@ def check_out_dir(name: str, value: str | os.PathLike) -> Path:
     text = os.fspath(value)
     if not isinstance(text, str) or not text.strip():
         raise ConfigError(f"{name} must be a directory path, got {describe(value)}")
+    if "\x00" in text:
+        raise ConfigError(f"{name} {text!r}: a path cannot contain a NUL byte")
     try:
         p = Path(text)
         if os.path.lexists(p) and not p.is_dir():
@@ -413,6 +415,8 @@ def check_out_file(name: str, value: str | os.PathLike, suffixes: Sequence[str])
     text = os.fspath(value)
     if not isinstance(text, str) or not text.strip():
         raise ConfigError(f"{name} must be a file path, got {describe(value)}")
+    if "\x00" in text:
+        raise ConfigError(f"{name} {text!r}: a path cannot contain a NUL byte")
     try:
         p = Path(text)
         if p.suffix.lower() not in suffixes:

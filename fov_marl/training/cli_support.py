@@ -219,10 +219,15 @@ def run_train(args: argparse.Namespace) -> Path:
         validate_hyperparams(args.algo, hyperparams)
     except ConfigError as exc:
         raise ValueError(f"--hp {exc}") from None
-    if args.n_agents is not None:
-        env_kwargs["n_agents"] = args.n_agents
-    if args.fov_deg is not None:
-        env_kwargs["fov_deg"] = args.fov_deg
+    for key, flag in (("n_agents", "--n-agents"), ("fov_deg", "--fov-deg")):
+        value = getattr(args, key)
+        if value is None:
+            continue
+        if key in env_kwargs and env_kwargs[key] != value:
+            raise ValueError(
+                f"--env {key}={env_kwargs[key]!r} conflicts with {flag} {value}; give one of them"
+            )
+        env_kwargs[key] = value
     try:
         path = train(
             args.algo,
