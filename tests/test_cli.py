@@ -150,3 +150,125 @@ def test_evaluate_pfcbf_with_safety_filter_flag(tmp_path):
     ep = data["episodes"][0]
     assert ep["policy"] == "pfcbf" and ep["collisions"] == 0
     assert ep["filter_interventions"] is not None and ep["cpu_ms_per_robot_step"] > 0
+
+
+# ----------------------------------------------------------------------------- issue 15
+def _error_line(argv, capsys) -> str:
+    """Run ``main(argv)``; it must exit 2 with one error line and no traceback."""
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    return err
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["render", "--policy", "random", "--max-cycles", "2", "--out", "{f}/x.gif"],
+        ["evaluate", "--policy", "random", "--episodes", "1", "--max-cycles", "2", "--out", "{f}"],
+        [
+            "evaluate",
+            "--policy",
+            "random",
+            "--episodes",
+            "1",
+            "--max-cycles",
+            "2",
+            "--out",
+            "{f}/a",
+        ],
+        ["reproduce", "--quick", "--out", "{f}"],
+        ["reproduce", "--quick", "--out", "{f}/sub"],
+        ["train", "--timesteps", "8", "--out", "{f}"],
+        ["train", "--timesteps", "8", "--out", "{f}/run"],
+    ],
+    ids=[
+        "render-under-file",
+        "eval-onto",
+        "eval-under",
+        "repro-onto",
+        "repro-under",
+        "train-onto",
+        "train-under",
+    ],
+)
+def test_clashing_out_paths_are_caught_before_any_work(argv, tmp_path, capsys, monkeypatch):
+    import fov_marl.evaluation
+    import fov_marl.report
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("work started before --out was checked")
+
+    monkeypatch.setattr(fov_marl.report, "reproduce", no_work)
+    monkeypatch.setattr(fov_marl.evaluation, "run_episode", no_work)
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file, not a directory")
+    err = _error_line([a.replace("{f}", str(blocker)) for a in argv], capsys)
+    assert "--out" in err and str(blocker) in err
+
+
+def test_render_onto_an_existing_directory(tmp_path, capsys):
+    (tmp_path / "ep.gif").mkdir()
+    err = _error_line(["render", "--policy", "random", "--out", str(tmp_path / "ep.gif")], capsys)
+    assert "--out" in err and "is a directory" in err
+
+
+def test_hp_errors_name_the_key_and_list_the_valid_ones(tmp_path, capsys):
+    base = ["train", "--timesteps", "8", "--out", str(tmp_path / "run")]
+    err = _error_line([*base, "--hp", "n_steps=abc"], capsys)
+    assert "--hp n_steps must be an integer" in err and "'abc'" in err
+    err = _error_line([*base, "--hp", "nosuchkey=1"], capsys)
+    assert "nosuchkey" in err and "n_steps" in err and "learning_rate" in err
+    assert not (tmp_path / "run").exists()  # nothing was created
+
+
+def test_bench_with_one_robot_is_a_clean_error(capsys):
+    err = _error_line(["bench", "--quick", "--n-agents", "1"], capsys)
+    assert "--n-agents" in err and "[2, 100]" in err
+
+
+@pytest.mark.parametrize(
+    ("content", "says"),
+    [(b"", "empty"), (b"PK\x03\x04garbage", "not a zip archive"), ("foreign", "not a PPO model")],
+)
+def test_damaged_or_foreign_model_files_say_so(content, says, tmp_path, capsys):
+    import zipfile
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.json").write_text(
+        json.dumps({"format": "fov_marl.training/1", "algo": "ppo", "scenario": "coverage",
+                    "n_agents": 6, "env_kwargs": {}})
+    )  # fmt: skip
+    if content == "foreign":
+        with zipfile.ZipFile(run / "model.zip", "w") as z:
+            z.writestr("readme.txt", "some other program's zip")
+    else:
+        (run / "model.zip").write_bytes(content)
+    err = _error_line(["evaluate", "--policy", str(run / "model.zip"), "--episodes", "1"], capsys)
+    assert "--policy" in err and str(run / "model.zip") in err and says in err
+
+
+def test_debug_shows_the_traceback_of_user_errors(monkeypatch):
+    with pytest.raises(ValueError, match="--policy must be a registered policy"):
+        main(["render", "--debug", "--policy", "nope"])
+    with pytest.raises(ValueError, match="--policy"):
+        main(["--debug", "evaluate", "--policy", "nope"])
+    monkeypatch.setenv("FOV_MARL_DEBUG", "1")
+    with pytest.raises(ValueError, match="--out"):
+        main(["render", "--out", "x.txt"])
+
+
+def test_interrupt_exits_130_without_traceback(monkeypatch, capsys):
+    import fov_marl.evaluation
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fov_marl.evaluation, "run_episode", interrupted)
+    assert main(["evaluate", "--policy", "random", "--episodes", "1", "--quiet"]) == 130
+    assert capsys.readouterr().err.strip() == "fov-marl evaluate: interrupted"

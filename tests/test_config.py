@@ -123,7 +123,6 @@ def test_every_field_has_a_range_test():
     ("name", "value"),
     [
         ("n_agents", 1),
-        ("n_agents", 256),
         ("n_agents", np.int64(12)),
         ("fov_deg", 360.0),
         ("fov_deg", 1e-3),
@@ -137,6 +136,12 @@ def test_every_field_has_a_range_test():
 def test_boundary_values_are_accepted(name, value):
     c = make_config(**{name: value})
     assert np.all(np.asarray(getattr(c, name)) == np.asarray(value))
+
+
+def test_the_largest_team_is_accepted_where_it_fits():
+    # 256 random starts 3 m apart do not fit in the default 40 m arena (Oler's bound: 211)
+    assert make_config(n_agents=256, arena_size_m=100.0).n_agents == 256
+    assert make_config(n_agents=211, init_min_separation_m=1.0).n_agents == 211
 
 
 def test_sequences_are_stored_as_float_tuples():
@@ -231,3 +236,151 @@ def test_changing_n_agents_drops_stale_initial_poses():
     assert c.replace(fov_deg=60.0).initial_poses is not None
     with pytest.raises(ConfigError, match="initial_poses"):
         c.replace(n_agents=4, initial_poses=GOOD_POSES)
+
+
+# ----------------------------------------------------------------------------- types
+REAL_FIELDS = [
+    f.name
+    for f in dataclasses.fields(ScenarioConfig)
+    if f.type in ("float", float) and f.name != "initial_poses"
+]
+WRONG_REALS = ["2.5", b"2.5", 2.5 + 0j, np.complex128(1.0), True, np.bool_(False), None, [2.5]]
+
+
+def test_real_fields_are_all_listed():
+    assert "fov_deg" in REAL_FIELDS and "crossing_radius_m" in REAL_FIELDS
+    assert len(REAL_FIELDS) == 21
+
+
+@pytest.mark.parametrize("name", REAL_FIELDS)
+@pytest.mark.parametrize("scenario", ["coverage", "crossing"])
+def test_wrongly_typed_reals_are_rejected_in_both_scenarios(name, scenario):
+    """Issue 15: '2.5' was silently accepted or crashed at step(); now a ConfigError
+    names the field (crossing fields included in coverage, and vice versa)."""
+    for value in WRONG_REALS:
+        with pytest.raises(ConfigError, match=f"^{name}") as err:
+            make_config(scenario=scenario, **{name: value})
+        assert "real number" in str(err.value), str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [("n_agents", 6.0), ("n_agents", "6"), ("n_agents", np.float64(6)), ("max_cycles", 10.0)],
+)
+def test_integers_must_be_integers(name, value):
+    with pytest.raises(ConfigError, match=f"{name} must be an integer"):
+        make_config(**{name: value})
+
+
+def test_numpy_scalars_are_accepted_and_stored_as_python_numbers():
+    c = make_config(
+        n_agents=np.int32(4),
+        fov_deg=np.float32(90.0),
+        dt_s=np.array(0.1),
+        max_cycles=np.uint16(50),
+        meas_cov_diag=np.array([0.1, 0.1, 0.5], dtype=np.float32),
+    )
+    assert type(c.n_agents) is int and type(c.max_cycles) is int
+    assert type(c.fov_deg) is float and c.fov_deg == 90.0 and type(c.dt_s) is float
+    assert all(type(x) is float for x in c.meas_cov_diag)
+    json.dumps(c.to_dict())  # nothing NumPy left
+
+
+@pytest.mark.parametrize(
+    "value",
+    [["0.1", "0.1", "0.5"], "0.1,0.1,0.5", [0.1, 0.1, True], [0.1, 0.1, 1j], {0.1, 0.5}],
+    ids=["strings", "str", "bool", "complex", "set"],
+)
+def test_sequences_must_hold_reals(value):
+    with pytest.raises(ConfigError, match="meas_cov_diag"):
+        make_config(meas_cov_diag=value)
+
+
+@pytest.mark.parametrize(
+    "poses",
+    [
+        [["5", "5", "0"], ["10", "5", "0"], ["20", "20", "0"]],
+        np.ones((3, 3), dtype=bool),
+        np.full((3, 3), 5.0, dtype=complex),
+        np.full((3, 3), 5.0).astype(object),
+        [[5.0, 5.0, 0.0], [10.0, 5.0], [20.0, 20.0, 0.0]],
+        [[5.0, 5.0, None], [10.0, 5.0, 0.0], [20.0, 20.0, 0.0]],
+        {"robot_0": [5.0, 5.0, 0.0]},
+    ],
+    ids=["strings", "bool", "complex", "object", "ragged", "none", "dict"],
+)
+def test_initial_poses_must_be_a_real_array(poses):
+    with pytest.raises(ConfigError, match="initial_poses"):
+        make_config(n_agents=3, initial_poses=poses)
+
+
+def test_scenario_must_be_a_string_choice():
+    for value in (None, 1, ["coverage"], b"coverage"):
+        with pytest.raises(ConfigError, match="scenario must be one of"):
+            ScenarioConfig(scenario=value)
+
+
+# ----------------------------------------------------------------------------- cross fields
+def test_crossing_fields_do_not_constrain_coverage():
+    """Issue 15: arena_size_m=10 was rejected for coverage by crossing_radius_m = 12."""
+    c = make_config(arena_size_m=10.0)
+    assert c.crossing_radius_m == 12.0 and c.density_mean_m == (5.0, 5.0)
+    make_config(crossing_radius_m=500.0, crossing_jitter_m=100.0)
+    with pytest.raises(ConfigError, match=r"crossing_radius_m must be in \(0.0, 4.5\]") as err:
+        make_config(scenario="crossing", arena_size_m=10.0)
+    assert "arena_size_m = 10.0" in str(err.value)
+    with pytest.raises(ConfigError, match=r"crossing_radius_m must be in \(0.0, 19.5\]"):
+        make_config(scenario="crossing", crossing_radius_m=19.6)
+    make_config(scenario="crossing", crossing_radius_m=19.5)
+    with pytest.raises(ConfigError, match=r"crossing_jitter_m must be in \[0.0, 20.0\]"):
+        make_config(scenario="crossing", crossing_jitter_m=21.0)
+
+
+def test_coverage_fields_do_not_constrain_crossing():
+    c = make_config(scenario="crossing", density_mean_m=(-5.0, 100.0), density_sigma_m=1e-3)
+    assert c.density_mean_m == (-5.0, 100.0)
+    with pytest.raises(ConfigError, match=r"density_mean_m\[x\] must be in \[0.0, 40.0\]"):
+        make_config(density_mean_m=(-5.0, 20.0))
+    with pytest.raises(ConfigError, match=r"density_sigma_m must be in .*at least eta_grid_m"):
+        make_config(density_sigma_m=0.05)
+
+
+def test_density_mean_follows_the_arena_only_when_not_given():
+    assert make_config(arena_size_m=60.0).density_mean_m == (30.0, 30.0)
+    assert make_config(arena_size_m=60.0, density_mean_m=(10, 10)).density_mean_m == (10.0, 10.0)
+    off = make_config(density_mean_m=(10.0, 30.0))
+    assert off.replace(arena_size_m=50.0).density_mean_m == (10.0, 30.0)
+    assert ScenarioConfig().replace(arena_size_m=80.0).density_mean_m == (40.0, 40.0)
+
+
+def test_random_starts_must_fit_in_the_arena():
+    with pytest.raises(ConfigError, match="init_min_separation_m = 3.0: at most 4 robots fit"):
+        make_config(arena_size_m=5.0)
+    make_config(arena_size_m=5.0, n_agents=4)
+    poses = [[1.0 + 1.1 * i, 1.0, 0.0] for i in range(3)]
+    make_config(arena_size_m=5.0, n_agents=3, initial_poses=poses)  # given starts: no bound
+
+
+# ----------------------------------------------------------------------------- resources
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"eta_grid_m": 1e-5}, r"eta_grid_m = 1e-05 .*4e\+06 cells per axis, more than .* 20000"),
+        ({"eta_grid_m": 5e-324}, "eta_grid_m"),
+        ({"sensing_radius_m": 1e5}, r"sensing_radius_m = 100000.0 .* limit of 500000"),
+        ({"sensing_radius_m": 1e300}, r"sensing_radius_m must be in \(0.0, 1e6\]"),
+        ({"n_agents": 256, "arena_size_m": 1000.0, "sensing_radius_m": 200.0}, "eta stencil"),
+    ],
+)
+def test_resource_guards_name_the_field_and_the_limit(kwargs, match):
+    with pytest.raises(ConfigError, match=match):
+        make_config(**kwargs)
+
+
+def test_resource_guards_concern_coverage_only():
+    make_config(scenario="crossing", eta_grid_m=1e-9, sensing_radius_m=1e6)
+
+
+def test_negative_zero_is_normalised():
+    c = make_config(scenario="crossing", crossing_jitter_m=-0.0)
+    assert math.copysign(1.0, c.crossing_jitter_m) == 1.0
