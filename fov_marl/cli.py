@@ -378,7 +378,8 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument(
             "--policy",
             default=policy_default,
-            help="registered policy (pfcbf, ideal, lloyd-pf, random) or PATH to a trained model.zip",
+            help="registered policy (pfcbf, ideal, lloyd-pf, random) or PATH to a trained "
+            "model.zip (evaluate only)",
         )
         sp.add_argument(
             "--n-agents",
@@ -391,7 +392,8 @@ def build_parser() -> argparse.ArgumentParser:
             "--fov-deg",
             type=_float_in("--fov-deg", 0.0, 360.0, lo_open=True),
             default=None,
-            help="camera FoV amplitude beta in degrees, (0, 360] (default: 120, or a model's training config)",
+            help="camera FoV amplitude beta in degrees, (0, 360] (default: 120, or a model's "
+            "training config)",
         )
         sp.add_argument(
             "--seed",

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 import numbers
 import os
-from collections.abc import Collection, Iterable, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -53,6 +53,7 @@ __all__ = [
     "as_real_vector",
     "check_out_dir",
     "check_out_file",
+    "check_params",
 ]
 
 
@@ -309,6 +310,30 @@ def check_seed(name: str, value: Any) -> int | None:
     if value is None:
         return None
     return check_int(name, value, 0, note="(or None)")
+
+
+def check_params(
+    name: str, value: Any, cls: type, defaults: Mapping[str, Any] | None = None
+) -> Any:
+    """Options given as a params dataclass, a dict of its fields, or None.
+
+    ``None`` gives ``cls(**defaults)``; an instance of ``cls`` is returned as is; a dict
+    must use only ``cls``'s field names (the message lists them) and is applied on top of
+    ``defaults``. Anything else is an error naming ``name``. The dataclass validates the
+    values itself.
+    """
+    base = dict(defaults or {})
+    if value is None:
+        return cls(**base)
+    if isinstance(value, cls):
+        return value
+    if not isinstance(value, Mapping):
+        raise ConfigError(
+            f"{name} must be a {cls.__name__}, a dict of its fields or None, got {describe(value)}"
+        )
+    fields = getattr(cls, "__dataclass_fields__", {})
+    check_keys(f"{name} fields", value, fields)
+    return cls(**{**base, **value})
 
 
 def check_budget(

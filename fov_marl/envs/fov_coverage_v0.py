@@ -22,7 +22,12 @@ Usage::
 
 Every keyword of ``parallel_env``/``env`` (except ``render_mode``) is a field of
 :class:`fov_marl.config.ScenarioConfig` with the paper's value as default; an unknown
-keyword or an out-of-range value raises ``ValueError`` naming the field and its range.
+keyword, a wrongly typed value (a string, bool or complex number for a real field, a
+float for an integer field) or an out-of-range value raises ``ValueError``
+(:class:`fov_marl.validation.ConfigError`) naming the field, the value and the allowed
+range. Crossing-only fields (``crossing_radius_m``, ...) are type-checked but do not
+constrain this scenario. ``scenario="coverage"`` is accepted; another scenario is an
+error (use :mod:`fov_marl.envs.fov_crossing_v0`).
 
 Arena and robots
 ----------------
@@ -46,8 +51,10 @@ index   meaning         mapping
 
 Values outside ``[-1, 1]`` are clipped to it. The planar speed is then limited to
 ``v_max_mps``: ``(vx, vy)`` is shrunk to norm ``v_max`` when longer (diagonal
-commands). NaN or inf, a shape other than ``(3,)``, or an action for an unknown
-agent raise ``ValueError`` naming the agent; every live agent needs an action.
+commands). An action is any integer or floating array-like of shape ``(3,)`` (list,
+tuple, ndarray of any width); strings, bools, complex numbers, object arrays, NaN or
+inf, a shape other than ``(3,)``, or an action for an unknown agent raise
+``ValueError`` naming the agent; every live agent needs an action.
 The mapping is :func:`fov_marl.spaces.action_to_velocity`.
 
 Observation space

@@ -32,7 +32,15 @@ Arena, kinematics, action space
 As in :mod:`fov_marl.envs.fov_coverage_v0`: square arena ``[0, L]²``, exact body-frame
 integration, positions projected onto ``[r, L − r]²``; actions ``[vx, vy, ω]`` in
 ``[-1, 1]`` scaled by ``v_max_mps``/``omega_max_radps``, clipped to the box, planar speed
-limited to ``v_max_mps``; NaN/inf/wrong shape raise ``ValueError`` naming the agent.
+limited to ``v_max_mps``; non-numeric (string, bool, complex, object) actions, NaN/inf
+and a wrong shape raise ``ValueError`` naming the agent.
+
+Keywords are :class:`fov_marl.config.ScenarioConfig` fields, validated as in the coverage
+env. The crossing checks tie ``crossing_radius_m`` (at most ``arena_size_m / 2 -
+robot_radius_m``) and ``crossing_jitter_m`` (at most ``arena_size_m / 2``) to the arena;
+coverage-only fields (``density_mean_m``, ``eta_grid_m``, ...) are type-checked but do
+not constrain this scenario. ``scenario="crossing"`` is accepted; another scenario is an
+error.
 
 Observation space
 -----------------

@@ -400,7 +400,8 @@ def _check_hp_value(algo: str, name: str, value: Any, spec: tuple[str, float, fl
         if isinstance(value, list | tuple):
             if len(value) != 2:
                 raise ConfigError(
-                    f"{name} must be an integer or [integer, 'step' | 'episode'], got {describe(value)}"
+                    f"{name} must be an integer or [integer, 'step' | 'episode'], "
+                    f"got {describe(value)}"
                 )
             n = check_int(f"{name}[0]", value[0], int(lo), int(hi))
             unit = check_choice(f"{name}[1]", value[1], ("step", "episode"))
@@ -602,20 +603,28 @@ def train(
         scenario: ``"coverage"`` or ``"crossing"``.
         safety_filter: train behind :class:`fov_marl.wrappers.SafetyFilterWrapper`.
         belief: add :class:`fov_marl.wrappers.belief.BeliefObservationWrapper` features.
-        timesteps: robot-steps (samples) to train for, >= 1 (see module docstring).
-        seed: seeds SB3 (python, numpy, torch) and the env copies (copy k: seed + k).
-        out_dir: output folder (created; existing files are overwritten).
-        n_envs: env copies, >= 1.
+        timesteps: robot-steps (samples) to train for, in [1, 1e12] (see module
+            docstring).
+        seed: seeds SB3 (python, numpy, torch) and the env copies (copy k: seed + k), in
+            [0, 2**31 - 1] (SB3 seeds NumPy's legacy generator).
+        out_dir: output folder (created; existing files are overwritten); an existing
+            non-directory, a path under one or an unwritable parent is an error before
+            anything runs.
+        n_envs: env copies, in [1, 1024].
         env_kwargs: scenario config fields (:class:`fov_marl.config.ScenarioConfig`).
         hyperparams: SB3 keyword overrides; ``policy_kwargs`` is merged with the default,
-            ``activation_fn`` given by name (``"tanh"``, ``"relu"``, ...).
+            ``activation_fn`` given by name (``"tanh"``, ``"relu"``, ...). Keys, types
+            and ranges are checked by :func:`validate_hyperparams` (the accepted keys are
+            :data:`HYPERPARAM_SPECS`), and the rollout (PPO) or replay (SAC) buffer must
+            fit in :data:`MAX_BUFFER_BYTES` (4 GiB).
         train_max_cycles: episode length while training when ``env_kwargs`` has no
             ``max_cycles``; ``None`` keeps the env's. The saved evaluation config keeps
             the env's own horizon (default 1000 steps).
         normalize: wrap in ``VecNormalize`` (observations and rewards).
         checkpoint_every: save a checkpoint every this many timesteps (0: never).
         progress_bar: show SB3's tqdm/rich progress bar.
-        torch_threads: ``torch.set_num_threads`` during training (restored after).
+        torch_threads: ``torch.set_num_threads`` during training (restored after), in
+            [1, 1024].
         safety_filter_kwargs: keywords of ``SafetyFilterWrapper``.
         belief_kwargs: keywords of ``BeliefObservationWrapper``.
         verbose: SB3 verbosity (1 prints the log table to stdout).
@@ -625,7 +634,9 @@ def train(
         (``config.json`` then says ``"interrupted": true``).
 
     Raises:
-        ValueError: unknown algo/scenario, bad numbers, invalid config fields.
+        ValueError: unknown algo/scenario, bad numbers, invalid config fields, unknown or
+            invalid hyper-parameters, an unusable ``out_dir`` (all checked before any
+            work; :class:`~fov_marl.validation.ConfigError` names the argument).
     """
     # Every argument is checked before any work (and before out_dir is created).
     algo = check_choice("algo", algo, sorted(ALGOS))
