@@ -29,7 +29,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
-from test_fuzz_env import PROBLEMS, Outcome, bounded
+from test_fuzz_env import PROBLEMS, Outcome, bounded, examples
 
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
 from fov_marl.wrappers import SafetyFilterWrapper
@@ -227,7 +227,7 @@ def test_full_sweep(case):
     _assert_good(case)
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=examples(30), deadline=None)
 @given(
     target=st.sampled_from(["coverage", "crossing"]),
     arr=hnp.arrays(

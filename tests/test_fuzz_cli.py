@@ -38,7 +38,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
-from test_fuzz_env import PROBLEMS, Outcome, bounded
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+from test_fuzz_env import PROBLEMS, Outcome, bounded, examples
 
 import fov_marl.bench
 import fov_marl.report
@@ -618,6 +620,54 @@ def test_subset(case):
 @pytest.mark.parametrize("case", SWEEP + REAL_BENCH, ids=str)
 def test_full_sweep(case):
     _assert_good(case)
+
+
+#: flags whose valid values set how much work runs: hypothesis keeps them small
+_COUNT_FLAGS = {
+    "--episodes", "--max-cycles", "--timesteps", "--n-envs", "--torch-threads", "--n-agents",
+    "--workers", "--train-max-cycles", "--checkpoint-every",
+}  # fmt: skip
+
+
+def _small_or_not_a_number(text: str) -> bool:
+    try:
+        return abs(float(text)) <= 8
+    except (ValueError, OverflowError):
+        return True
+
+
+_FLAG_CHOICES = [(c, f) for c, flags in SPECS.items() for f in flags if f != "--out"]
+
+
+@settings(max_examples=examples(40), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    choice=st.sampled_from(_FLAG_CHOICES),
+    text=st.one_of(
+        st.text(max_size=12),
+        st.from_regex(r"-?[0-9]{1,3}(\.[0-9]{0,2})?(e-?[0-9])?", fullmatch=True),
+        st.sampled_from(["nan", "inf", "-0", "0", "1", "2", "true", "null", "{}", "[]"]),
+    ),
+)
+def test_hypothesis_flag_text(choice, text):
+    """Any text for any flag: a clean run or one line naming the flag, never a traceback."""
+    command, flag = choice
+    if flag in _COUNT_FLAGS:
+        assume(_small_or_not_a_number(text))
+    if flag == "--policy":
+        assume(not _is_path_like(text))
+    spec = SPECS[command][flag]
+    if spec["good"] == [None]:  # a bare flag: give it a value, always an error
+        argv = (*_argv(command, _base(command)), f"{flag}={text}")
+    elif command == "bench":
+        argv = _with(command, flag, [text])
+    else:
+        argv = _with(command, flag, text, append=spec.get("append", False))
+    case = CliCase(argv, "either", spec.get("names", (flag,)), _stub_for(command))
+    _assert_good(case)
+
+
+def _is_path_like(text: str) -> bool:
+    return text.endswith(".zip") or os.path.isdir(text)
 
 
 def test_stubbed_work_gets_the_parsed_flags():

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import signal
 import sys
 import time
@@ -48,6 +49,14 @@ from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
 from fov_marl.estimation import TrackerParams
 
 MODULES = {"coverage": fov_coverage_v0, "crossing": fov_crossing_v0}
+
+
+def examples(n: int) -> int:
+    """Hypothesis examples per property: ``n`` (time-bounded for the normal suite), or
+    ``FOV_FUZZ_EXAMPLES`` for a deliberate longer search."""
+    return int(os.environ.get("FOV_FUZZ_EXAMPLES", n))
+
+
 CASE_TIME_LIMIT_S = 10.0
 PROBLEMS = ("raw", "unnamed", "silent", "rejected", "hang")
 
@@ -600,7 +609,7 @@ def _real_values() -> st.SearchStrategy:
     )
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(40), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     scenario=st.sampled_from(sorted(MODULES)),
     field=st.sampled_from(sorted(f for f, k in KINDS.items() if k == "real")),
@@ -625,7 +634,7 @@ def _is_real_for_oracle(value: Any) -> bool:
     return isinstance(value, int | float | np.integer | np.floating | Fraction)
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=examples(25), deadline=None)
 @given(
     scenario=st.sampled_from(sorted(MODULES)),
     n=st.integers(1, 12),

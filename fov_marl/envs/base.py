@@ -159,7 +159,14 @@ class FovEnvBase(ParallelEnv):
         self._collisions_total = 0
         self._violations_total = 0
         self._min_distance_episode = np.inf
-        self._poses = self._reset_scenario(self._rng)
+        try:
+            self._poses = self._reset_scenario(self._rng)
+        except ValueError as exc:  # random starts that do not fit: name the fields
+            cfg = self.config
+            raise ConfigError(
+                f"reset: {exc} (n_agents = {cfg.n_agents}, arena_size_m = {cfg.arena_size_m}, "
+                f"init_min_separation_m = {cfg.init_min_separation_m})"
+            ) from None
         metrics = self._step_metrics_common()
         col_i, viol_i = metrics.pop("_col_i"), metrics.pop("_viol_i")
         self._rewards_and_metrics(col_i, viol_i, metrics, reset=True)
