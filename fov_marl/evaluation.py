@@ -73,6 +73,12 @@ class EpisodeRecord:
     time_to_arrival_s: float | None = None
     filter_interventions: int | None = None
     qp_fallbacks: int | None = None
+    intervention_rate: float | None = None
+    mean_action_change: float | None = None
+    safety_fallbacks: int | None = None
+    time_to_settle_s: float | None = None
+    path_length_m: float | None = None
+    mean_speed_last_50s: float | None = None
     eta_series: list[float] = field(default_factory=list, repr=False)
     trajectory: list[list[list[float]]] = field(default_factory=list, repr=False)
 
@@ -127,8 +133,12 @@ def run_episode(
     eta_series: list[float] = []
     traj: list[list[list[float]]] = []
     cpu: list[float] = []
-    interventions = fallbacks = 0
+    interventions = fallbacks = safety_fb = 0
+    du_sum = 0.0
     have_filter = False
+    speeds: list[float] = []
+    path = 0.0
+    prev_xy = env.unwrapped.poses[:, :2]
     m = infos[env.possible_agents[0]]["metrics"]
     if "eta" in m:
         eta_series.append(m["eta"])
@@ -148,8 +158,24 @@ def run_episode(
         if "safety" in info0:
             have_filter = True
             t_filter = float(getattr(env, "last_cpu_s", 0.0))
-            interventions += sum(int(infos[a]["safety"]["intervened"]) for a in infos)
-            fallbacks += sum(int(infos[a]["safety"]["fallback"]) for a in infos)
+            saf = [infos[a]["safety"] for a in infos]
+            interventions += sum(int(x["intervened"]) for x in saf)
+            fallbacks += sum(int(x["fallback"]) for x in saf)
+            safety_fb += sum(int(x["status"] == "safety_fallback") for x in saf)
+            du_sum += float(
+                sum(
+                    np.linalg.norm(
+                        np.asarray(x["applied_action"], np.float64)
+                        - np.asarray(x["nominal_action"], np.float64)
+                    )
+                    for x in saf
+                )
+            )
+        xy = env.unwrapped.poses[:, :2]
+        step_len = np.linalg.norm(xy - prev_xy, axis=1)
+        prev_xy = xy
+        speeds.append(float(step_len.mean()) / dt)
+        path += float(step_len.mean())
         cpu.append((t_policy + t_filter) * 1e3 / n)
         m = info0["metrics"]
         if "eta" in m:
@@ -164,6 +190,11 @@ def run_episode(
             break
     env.close()
     cpu_arr = np.asarray(cpu) if cpu else np.zeros(1)
+    pipe = getattr(pol, "pipeline", None)
+    if not have_filter and pipe is not None and hasattr(pipe, "counters"):
+        safety_fb = int(pipe.counters.get("safety_fallbacks", 0))
+    robot_steps = max(1, steps * n)
+    last = speeds[-max(1, round(50.0 / dt)) :] if speeds else []
     return EpisodeRecord(
         seed=seed,
         scenario=scenario,
@@ -183,6 +214,12 @@ def run_episode(
         time_to_arrival_s=arrival_t,
         filter_interventions=interventions if have_filter else None,
         qp_fallbacks=fallbacks if have_filter else None,
+        intervention_rate=interventions / robot_steps if have_filter else None,
+        mean_action_change=du_sum / robot_steps if have_filter else None,
+        safety_fallbacks=safety_fb if (have_filter or pipe is not None) else None,
+        time_to_settle_s=time_to_settle(speeds, dt),
+        path_length_m=path,
+        mean_speed_last_50s=float(np.mean(last)) if last else None,
         eta_series=eta_series,
         trajectory=traj,
     )
@@ -198,7 +235,33 @@ SUMMARY_FIELDS = (
     "steps",
     "arrived",
     "time_to_arrival_s",
+    "intervention_rate",
+    "mean_action_change",
+    "safety_fallbacks",
+    "time_to_settle_s",
+    "path_length_m",
+    "mean_speed_last_50s",
 )
+
+
+def time_to_settle(
+    speeds_mps: Sequence[float], dt_s: float, threshold: float = 0.05
+) -> float | None:
+    """First time after which the team's mean speed stays below ``threshold`` (m/s).
+
+    Args:
+        speeds_mps: team mean speed of every step (step k covers ``[k dt, (k + 1) dt]``).
+
+    Returns:
+        Simulated seconds ``k dt`` of the first step k from which every speed is below
+        the threshold, or None when the last step is not (the team never settled).
+    """
+    sp = np.asarray(speeds_mps, dtype=np.float64)
+    if sp.size == 0 or sp[-1] >= threshold:
+        return None
+    above = np.flatnonzero(sp >= threshold)
+    k = 0 if above.size == 0 else int(above[-1]) + 1
+    return k * dt_s
 
 
 def _stats(values: Sequence[float]) -> dict[str, Any]:

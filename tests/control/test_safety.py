@@ -110,7 +110,7 @@ def _blind_reference(p, mass, K, risk, r_cut):
                     cand.append((r, m, q))
             cand.sort(key=lambda c: c[0])
             acc = 0.0
-            for r, m, q in cand:
+            for _r, m, q in cand:
                 acc += m
                 if acc > risk + 1e-9:
                     rep[i, k] = q
