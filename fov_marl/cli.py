@@ -510,6 +510,9 @@ def build_parser() -> argparse.ArgumentParser:
             raise CliError(msg)
 
         t.set_defaults(func=_no_train)
+    from fov_marl.stress import add_stress_parser
+
+    add_stress_parser(sub)
     return p
 
 
@@ -542,7 +545,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     debug = bool(getattr(args, "debug", False)) or bool(os.environ.get("FOV_MARL_DEBUG"))
     try:
-        args.func(args)
+        rc = args.func(args)
     except KeyboardInterrupt:
         if debug:
             raise
@@ -558,7 +561,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         sys.stderr.write(f"fov-marl {args.command}: error: {_one_line(_describe_os_error(exc))}\n")
         return 2
-    return 0
+    return rc if type(rc) is int else 0
 
 
 if __name__ == "__main__":

@@ -302,3 +302,21 @@ def test_filter_full_sweep_no_collisions():
     rows = run_stress(default_cases(full=True), episodes=20, steps=300, workers=os.cpu_count() or 1)
     bad = [r for r in rows if r["collisions"]]
     assert not bad, f"\n{len(bad)} / {len(rows)} cases collide\n" + format_stress_table(bad)
+
+
+def test_fov_marl_stress_runs_from_the_cli(capsys):
+    from fov_marl.cli import main
+
+    rc = main(
+        ["stress", "--quick", "--adversaries", "straight", "--n-agents", "2", "--fov-deg", "120",
+         "--starts", "head_on_pair", "--episodes", "1", "--steps", "20", "--quiet",
+         "--fail-on-collision"]
+    )  # fmt: skip
+    out = capsys.readouterr().out
+    assert rc == 0 and "straight" in out and "min_d_m" in out
+    rc = main(
+        ["stress", "--quick", "--adversaries", "straight", "--n-agents", "2", "--fov-deg", "120",
+         "--starts", "head_on_pair", "--episodes", "1", "--steps", "40", "--quiet", "--no-filter",
+         "--fail-on-collision"]
+    )  # fmt: skip
+    assert rc == 1  # the unfiltered pair collides, and the flag says so
