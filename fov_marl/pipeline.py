@@ -319,7 +319,9 @@ class PfCbfPipeline:
                     "ellipse_distance": np.zeros((1, 0)),
                     "ids": np.zeros((1, 0), dtype=np.int64),
                 }
+            t_rows = time.perf_counter()
             rows = self.safety_rows() if ellipse else None
+            self.last_timings["safety_rows"] = time.perf_counter() - t_rows
             for i, ctrl in enumerate(self.controllers):
                 res = ctrl.solve(
                     u_star[i],

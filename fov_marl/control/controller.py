@@ -43,8 +43,13 @@ Pipeline of :meth:`FovCbfController.solve`
    the safety rows (above every FoV level; the lowest level when ``safety_first`` is
    False and safety is soft): a robot moves faster than ``blind_speed_mps`` only
    where its camera looks, unless avoiding a collision needs it.
+   The collision rows of :mod:`~fov_marl.control.safety` (``safety=``, or built from
+   ``p_body`` taken as exact when not given) join the safety level; with
+   ``params.safety_model == "ellipse"`` (default) they replace Eq. 12 row 3.
 4. :class:`~fov_marl.control.qp.HierarchicalQP` (cascade whose last candidate is the
-   Eq. 19 solution; fallbacks).
+   Eq. 19 solution; fallbacks), in the metric ``‖Δv‖² + λ² Δω²``
+   (``params.omega_weight``). If the collision rows cannot be met: the safe fallback;
+   if they block u* (a symmetric encounter): "keep right" (``deadlock_turn_deg``).
 
 The cost per robot is bounded independently of N: row assembly is vectorised over
 neighbours (a few µs per op whatever M), and at most ``2 (max_levels + 1)`` small QPs
@@ -96,8 +101,11 @@ class ControlResult:
         status: ``"unconstrained"`` (u* projected on the admissible set satisfies every
             row, no QP), ``"solved"`` (all rows hold), ``"relaxed"`` (the hierarchy had
             to violate some rows, κ* > 1e-3), ``"degraded"`` (a QP failed; u is the
-            best candidate found), ``"invalid_input"`` (non-finite input, u = 0) or
-            ``"qp_failed"`` (a hard level is infeasible, u = 0); see
+            best candidate found), ``"invalid_input"`` (non-finite input, u = 0),
+            ``"qp_failed"`` (a hard level is infeasible, u = 0; only with the paper's
+            ``safety_model="mean"``) or ``"safety_fallback"`` (the collision rows of
+            :mod:`~fov_marl.control.safety` cannot all be met: the safe fallback of
+            :meth:`FovCbfController._safe_fallback`); see
             :class:`~fov_marl.control.qp.QPResult`.
         fallback: True when ``u`` is a fallback input (the last three statuses).
         intervened: ``‖u − proj(u*)‖ > params.intervention_tol``, with proj the
