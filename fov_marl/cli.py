@@ -238,9 +238,13 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     t0 = time.perf_counter()
     results: list[dict[str, Any]] = []
     if args.workers > 1 and len(jobs) > 1:
+        import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
-        with ProcessPoolExecutor(max_workers=min(args.workers, len(jobs))) as ex:
+        # Forking a process that has started torch's threads (a model loaded for the
+        # checks above, or training in the same process) can deadlock the children.
+        ctx = multiprocessing.get_context("spawn") if "torch" in sys.modules else None
+        with ProcessPoolExecutor(max_workers=min(args.workers, len(jobs)), mp_context=ctx) as ex:
             for k, res in enumerate(ex.map(_episode_job, jobs)):
                 results.append(res)
                 _progress(k + 1, len(jobs), t0, args.quiet)
@@ -273,7 +277,8 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     for f in ("final_eta", "time_to_eta_99", "collisions", "min_distance", "cpu_ms_per_robot_step"):
         s = summary.get(f)
         if s and s["mean"] is not None:
-            srows.append([f, s["mean"], s["std"], s["ci95"][0], s["ci95"][1], s["n"]])
+            lo, hi = s.get("ci95") or (None, None)  # None for a single episode
+            srows.append([f, s["mean"], s["std"], lo, hi, s["n"]])
     print()
     print(format_table(srows, ("metric", "mean", "std", "ci95_lo", "ci95_hi", "n")))
     if out_dir is not None:
@@ -512,7 +517,10 @@ def build_parser() -> argparse.ArgumentParser:
         t.set_defaults(func=_no_train)
     from fov_marl.stress import add_stress_parser
 
-    add_stress_parser(sub)
+    stress = add_stress_parser(sub)
+    stress.add_argument(
+        "--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks"
+    )
     return p
 
 

@@ -198,6 +198,16 @@ def _base(command: str) -> list[tuple[str, object]]:
             ("--no-progress", None),
             ("--out", "OUTDIR"),
         ]
+    if command == "stress":
+        return [
+            ("--adversaries", "charge_centre"),
+            ("--n-agents", "2"),
+            ("--fov-deg", "120"),
+            ("--starts", "random"),
+            ("--episodes", "1"),
+            ("--steps", "2"),
+            ("--quiet", None),
+        ]
     raise AssertionError(command)
 
 
@@ -439,6 +449,47 @@ SPECS: dict[str, dict[str, dict]] = {
     },
 }
 
+SPECS["stress"] = {
+    # --quick filters the quick subset by the grid flags: the base grid is not in it
+    "--quick": {
+        "bad": ["--quick=1", "--full"],
+        "good": [],
+        "either": [None],
+        "names": ("--quick", "--full"),
+    },
+    "--full": {"bad": ["--full=yes"], "good": [None]},
+    "--adversaries": {
+        "bad": ["nope", "", ",", "charge_centre,nope"],
+        "good": ["charge_centre", "random,straight"],
+    },
+    "--n-agents": {
+        "bad": ["0", "-1", "abc", "", "2,x", "1.5", ","],
+        "good": ["2", "1,3"],
+        "either": ["257"],
+        "names": ("--n-agents", "n_agents"),
+    },
+    "--fov-deg": {"bad": ["0", "400", "nan", "abc", "", "120,inf"], "good": ["120", "45,360"]},
+    "--starts": {
+        "bad": ["nope", ""],
+        "good": ["random", "corner", "head_on_pair"],
+        "either": ["random,"],
+    },
+    "--scenario": {"bad": ["maze", ""], "good": ["coverage", "crossing"]},
+    "--episodes": {"bad": BAD_POSITIVE_INT, "good": ["1", "2"]},
+    "--steps": {"bad": BAD_POSITIVE_INT, "good": ["1", "3"]},
+    "--seed": {"bad": BAD_NONNEG_INT, "good": ["0", "5"]},
+    "--workers": {"bad": BAD_POSITIVE_INT, "good": ["1"]},
+    "--no-filter": {"bad": ["--no-filter=1"], "good": [None]},
+    "--json": {
+        "bad": ["{ws}/afile/x.json", "{ws}/existing_dir"],
+        "good": ["OUTFILE.json"],
+        "names": ("--json", "afile", "existing_dir"),
+    },
+    "--fail-on-collision": {"bad": ["--fail-on-collision=1"], "good": [None]},
+    "--quiet": {"bad": ["--quiet=1"], "good": [None]},
+    "--debug": {"bad": ["--debug=1"], "good": [None]},
+}
+
 GLOBAL_CASES = [
     CliCase((), "invalid", ("command", "required"), label="no command"),
     CliCase(("nosuch",), "invalid", ("nosuch",), label="unknown command"),
@@ -473,7 +524,8 @@ def sweep() -> list[CliCase]:
                     cases.append(CliCase(argv, expect, names, stub, label))
             for v in spec.get("either", []):
                 label = f"{command} {flag} {v!r} [either]"
-                cases.append(CliCase(_with(command, flag, v), "either", names, stub, label))
+                argv = _with(command, flag, v) if v is not None else _with(command, flag, None)
+                cases.append(CliCase(argv, "either", names, stub, label))
     # train with SB3's progress bar (the base line hides it)
     pairs = [(f, v) for f, v in _base("train") if f != "--no-progress"]
     cases.append(CliCase(_argv("train", pairs), "valid", (), (), "train with the progress bar"))
@@ -481,8 +533,47 @@ def sweep() -> list[CliCase]:
 
 
 SWEEP = sweep()
-#: the real bench (slow sweep only)
-REAL_BENCH = [
+#: the real bench and worker processes, run as ``python -m fov_marl.cli`` subprocesses
+#: (a deadlocked worker cannot be interrupted in process) (slow sweep only)
+IN_SUBPROCESS = [
+    CliCase(
+        (
+            "evaluate",
+            "--policy",
+            "random",
+            "--n-agents",
+            "200",
+            "--episodes",
+            "2",
+            "--workers",
+            "2",
+            "--max-cycles",
+            "2",
+            "--quiet",
+        ),
+        "either",
+        ("n_agents", "init_min_separation_m"),
+        (),
+        "evaluate: a worker's error is one line",
+    ),  # fmt: skip
+    CliCase(
+        (
+            "evaluate",
+            "--policy",
+            "{ws}/model",
+            "--episodes",
+            "2",
+            "--workers",
+            "2",
+            "--max-cycles",
+            "2",
+            "--quiet",
+        ),
+        "valid",
+        (),
+        (),
+        "evaluate a model in worker processes",
+    ),  # fmt: skip
     CliCase(
         ("bench", "--quick", "--n-agents", "2"),
         "valid",
@@ -549,11 +640,12 @@ def invoke(case: CliCase) -> CliResult:
 def classify(case: CliCase, out: Outcome, res: CliResult | None) -> str | None:
     if out.kind == "hang":
         return "hang"
-    if out.kind != "ok" or res is None or res.rc not in (0, 2):
+    ok_codes = (0, 1, 2) if "--fail-on-collision" in case.argv else (0, 2)  # 1: collided
+    if out.kind != "ok" or res is None or res.rc not in ok_codes:
         return "raw"
     if "Traceback" in res.stderr:
         return "raw"
-    if res.rc == 0:
+    if res.rc in (0, 1):
         return "silent" if case.expect == "invalid" else None
     if case.expect == "valid":
         return "rejected"
@@ -563,7 +655,32 @@ def classify(case: CliCase, out: Outcome, res: CliResult | None) -> str | None:
     return None if any(n in lines[0] for n in case.names) else "unnamed"
 
 
+def run_subprocess(case: CliCase, limit_s: float = 300.0):
+    """The case as a real ``fov-marl`` process, killed after ``limit_s``."""
+    import subprocess
+
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    env.pop("FOV_MARL_DEBUG", None)
+    t0 = time.perf_counter()
+    try:
+        p = subprocess.run(
+            [sys.executable, "-m", "fov_marl.cli", *case.resolved()],
+            capture_output=True,
+            text=True,
+            timeout=limit_s,
+            env=env,
+        )
+    except subprocess.TimeoutExpired:
+        out = Outcome("hang", f"ran past {limit_s} s", time.perf_counter() - t0)
+        return classify(case, out, None), out, None
+    res = CliResult(p.returncode, p.stdout, p.stderr)
+    out = Outcome("ok", "", time.perf_counter() - t0)
+    return classify(case, out, res), out, res
+
+
 def run(case: CliCase) -> tuple[str | None, Outcome, CliResult | None]:
+    if case in IN_SUBPROCESS:
+        return run_subprocess(case)
     box: list[CliResult] = []
     limit = LIMIT_S.get(case.argv[0] if case.argv else "", DEFAULT_LIMIT_S)
     out = bounded(lambda: box.append(invoke(case)), limit)
@@ -617,7 +734,7 @@ def test_subset(case):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("case", SWEEP + REAL_BENCH, ids=str)
+@pytest.mark.parametrize("case", SWEEP + IN_SUBPROCESS, ids=str)
 def test_full_sweep(case):
     _assert_good(case)
 
@@ -731,13 +848,13 @@ def test_the_harness_can_fail():
 def main_sweep() -> int:
     t0 = time.perf_counter()
     counts: Counter = Counter()
-    for case in SWEEP + REAL_BENCH:
+    for case in SWEEP + IN_SUBPROCESS:
         problem, out, res = run(case)
         counts[problem or "good"] += 1
         if problem:
             print(_describe(problem, case, out, res), file=sys.stderr)
     print(
-        f"CLI: {len(SWEEP) + len(REAL_BENCH)} cases, "
+        f"CLI: {len(SWEEP) + len(IN_SUBPROCESS)} cases, "
         + ", ".join(f"{counts[p]} {p}" for p in PROBLEMS)
         + f" ({time.perf_counter() - t0:.1f} s)"
     )

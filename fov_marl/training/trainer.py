@@ -828,7 +828,9 @@ class LearnedPolicy:
         ``overrides`` change config fields (e.g. ``max_cycles``); changing ``n_agents``
         raises ``ValueError`` because the observation size depends on it.
         """
-        if "n_agents" in overrides and int(overrides["n_agents"]) != self.n_agents:
+        if "n_agents" in overrides and not (
+            is_integer(overrides["n_agents"]) and int(overrides["n_agents"]) == self.n_agents
+        ):
             raise ValueError(
                 f"n_agents must be {self.n_agents} (the policy's observation size depends on "
                 f"it), got {overrides['n_agents']}"
