@@ -518,9 +518,10 @@ def build_parser() -> argparse.ArgumentParser:
     from fov_marl.stress import add_stress_parser
 
     stress = add_stress_parser(sub)
-    stress.add_argument(
-        "--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks"
-    )
+    if not any("--debug" in a.option_strings for a in stress._actions):
+        stress.add_argument(
+            "--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks"
+        )
     return p
 
 
