@@ -115,11 +115,29 @@ EVAL_COLUMNS = (
     "seed",
     "steps",
     "final_eta",
+    "eta_normalised",
+    "time_to_eta_norm_s",
     "time_to_eta_99",
+    "time_to_settle_s",
     "collisions",
     "min_distance",
     "cpu_ms_per_robot_step",
 )
+#: the episode table's columns per scenario (EpisodeRecord fields)
+EVAL_COLUMNS_BY_SCENARIO = {
+    "coverage": EVAL_COLUMNS,
+    "crossing": (
+        "seed",
+        "steps",
+        "arrived",
+        "time_to_arrival_s",
+        "mean_time_to_arrive_s",
+        "safety_violations",
+        "collisions",
+        "min_distance",
+        "cpu_ms_per_robot_step",
+    ),
+}
 
 #: CLI flags that set scenario config fields
 _CONFIG_FLAGS = {"n_agents": "--n-agents", "fov_deg": "--fov-deg", "max_cycles": "--max-cycles"}
@@ -260,21 +278,10 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
         "summary": summary,
         "args": {k: v for k, v in vars(args).items() if k != "func"},
     }
-    rows = [
-        [
-            r.seed,
-            r.steps,
-            r.final_eta,
-            r.time_to_eta_99,
-            r.collisions,
-            r.min_distance,
-            r.cpu_ms_per_robot_step,
-        ]
-        for r in records
-    ]
-    print(format_table(rows, EVAL_COLUMNS))
+    columns = EVAL_COLUMNS_BY_SCENARIO[args.scenario]
+    print(format_table([[getattr(r, c) for c in columns] for r in records], columns))
     srows = []
-    for f in ("final_eta", "time_to_eta_99", "collisions", "min_distance", "cpu_ms_per_robot_step"):
+    for f in columns[2:]:
         s = summary.get(f)
         if s and s["mean"] is not None:
             lo, hi = s.get("ci95") or (None, None)  # None for a single episode
@@ -443,7 +450,9 @@ def build_parser() -> argparse.ArgumentParser:
         parents=[common],
     )
     r.add_argument("--out", default="report", help="output directory")
-    r.add_argument("--quick", action="store_true", help="reduced version (a few minutes)")
+    r.add_argument(
+        "--quick", action="store_true", help="every section at a tiny size (under a minute)"
+    )
     r.add_argument(
         "--workers",
         type=_positive_int("--workers", 256),
@@ -454,7 +463,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--seeds",
         type=_positive_int("--seeds", 1000),
         default=None,
-        help="random starts per experiment, in [1, 1000] (default 5; 2 with --quick)",
+        help="random starts per coverage condition, in [1, 1000] (default 20; 2 with --quick); "
+        "finished runs are cached in OUT/cache, so an interrupted run resumes",
     )
     r.set_defaults(func=run_reproduce)
 

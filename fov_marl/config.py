@@ -37,6 +37,52 @@ a disk of radius 6 / 0.5559 = 10.8 m (optimal 6-disk covering), which holds
 ``1 - exp(-10.8**2 / 15.68) = 0.9994`` of the mass, so six robots in a good
 configuration reach η ≥ 0.999. The horizon of 1000 steps x 0.2 s = 200 s lets a
 robot starting in a corner (28 m from q_m) arrive at 1 m/s with time to settle.
+
+The default is the literal reading of the paper ("η = 1": φ completely covered) and
+stays the env default (training, tests and the controller tuning use it). It does not
+discriminate the paper's comparison, so ``fov-marl reproduce`` runs it at
+``REPRODUCE_SIGMA_M = 4.0`` m and keeps σ = 2.8 m beside it as the literal measure.
+
+Density for the comparison (measured, paired seeds; ``fov_marl.report``)
+-----------------------------------------------------------------------
+
+Pilot: 6 robots, the same 5 random starts (seeds 0-4) for pfcbf β = 120°, pfcbf
+β = 360° and ``ideal``, 1000 steps, current controller. η_opt is
+:func:`fov_marl.metrics.optimal_eta` (the best η six disks can reach); "norm" is
+η / η_opt; "120 vs 360" is ``mean t(120°) / mean t(360°) − 1`` over the seeds.
+
+=====  =======  ========================  ===============================  =============
+σ (m)  η_opt    final η/η_opt (120/360/    time to threshold, 120 vs 360     settle (s)
+                ideal, mean)               (360 vs ideal)                    120/360/ideal
+=====  =======  ========================  ===============================  =============
+2.8    0.9999   0.995 / 0.996 / 0.996      η=0.99: 11.0 vs 10.2 s, +8%       79 / 27 / 21
+                                           (+18%); norm 0.95: +3% (+1%)
+3.4    0.9987   0.984 / 0.987 / 0.986      norm 0.95: +1% (+1%);             88 / 28 / 23
+                                           norm 0.97: +24% (+1%)
+4.0    0.9938   0.970 / 0.973 / 0.972      norm 0.95: 10.6 vs 9.1 s, +17%    41 / 27 / 24
+                                           (per seed +4..+43%); 0.99 x
+                                           ideal's final: +26% (+2%)
+5.0    0.9695   0.945 / 0.947 / 0.944      norm 0.93: +60% (+2%), seeds      45 / 39 / 24
+                                           -1..+177%; norm 0.95: 3/5 never
+=====  =======  ========================  ===============================  =============
+
+Reasoning. (1) At σ = 2.8 m one robot at q_m already has η = 0.90 and the team passes
+η = 0.99 after 4-19 s, while the robots are still travelling (they settle 20-130 s
+later): the time to 0.99 measures the approach of the first robots, not the final
+configuration, and β = 360° is indistinguishable from ``ideal`` and from 120° at every
+threshold up to 0.98 η_opt (+1-3%). (2) The paper's "η = 1" cannot be read literally
+once σ is large enough to matter: at σ = 4 m six disks reach at most η_opt = 0.9938,
+and Lloyd's algorithm (limited-range Voronoi centroids) settles ~3% below that
+(ideal: 0.972 η_opt), so the report reads "η = 1" as η/η_opt = 1 and the threshold is
+relative to η_opt. (3) The threshold must be reached by every condition on every
+seed with margin (the lowest final η/η_opt of the 15 pilot runs at σ = 4 m is 0.965),
+yet lie past the travel phase (η/η_opt ≈ 0.90 is reached in 6-7 s by all three):
+0.95 η_opt (``fov_marl.evaluation.ETA_NORM_THRESHOLD``). (4) σ = 5 m discriminates
+more but the threshold must then drop to 0.93 and the per-seed spread explodes;
+σ = 3.4 m needs 0.97 η_opt, within 1.3% of the equilibrium. Hence σ = 4 m with the
+0.95 η_opt threshold; the report adds the issue's paired reading (0.99 of ``ideal``'s
+final η on the same seed), the time to settle (the paper's "time required to reach the
+final configuration") and the literal σ = 2.8 m, η = 0.99 comparison.
 """
 
 from __future__ import annotations
@@ -68,7 +114,11 @@ __all__ = [
     "MAX_REWARD_WEIGHT",
     "MAX_ETA_CELLS_PER_AXIS",
     "MAX_ETA_STENCIL",
+    "REPRODUCE_SIGMA_M",
 ]
+
+#: Density σ (m) of the paper's comparison in ``fov-marl reproduce`` (module docstring).
+REPRODUCE_SIGMA_M = 4.0
 
 Scenario = Literal["coverage", "crossing"]
 _SCENARIOS = ("coverage", "crossing")

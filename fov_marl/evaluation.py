@@ -524,7 +524,9 @@ def paired_difference(
     with its bootstrap CI (resampling seeds, clipped to ``[−100, ∞)``), the per-pair
     differences, and the two-sided p-value of the exact (n ≤ 16) or Monte-Carlo
     (20 000 draws) paired sign-flip permutation test of the mean difference.
-    ``significant`` is True when the difference's CI excludes 0.
+    ``significant`` is True when both say so at the 5% level: p < 0.05 and the
+    difference's CI excludes 0 (with very few pairs the percentile bootstrap is too
+    narrow; the exact test then decides: at n = 2 the smallest p is 0.5).
     """
     pairs = [(x, y) for x, y in zip(a, b, strict=True) if x is not None and y is not None]
     out: dict[str, Any] = {"n": len(pairs), "dropped": len(a) - len(pairs)}
@@ -550,7 +552,9 @@ def paired_difference(
         "rel_pct": 100.0 * (float(x.mean()) / my - 1.0) if my != 0 else None,
         "rel_ci95": rel_ci,
         "p_value": p,
-        "significant": None if ci is None else bool(ci[0] > 0.0 or ci[1] < 0.0),
+        "significant": (
+            None if ci is None or p is None else bool((ci[0] > 0.0 or ci[1] < 0.0) and p < 0.05)
+        ),
         "diffs": d.tolist(),
     }
 

@@ -96,6 +96,7 @@ def test_paired_difference_drops_incomplete_pairs_and_uses_the_exact_test():
     assert r["n"] == 2 and r["dropped"] == 2 and r["diffs"] == [1.0, 1.0]
     # n = 2, both differences +1: 2 of the 4 sign patterns are as extreme
     assert r["p_value"] == pytest.approx(0.5)
+    assert r["significant"] is False  # CI excludes 0, but p = 0.5: too few pairs
     empty = paired_difference([None], [1.0])
     assert empty["n"] == 0 and empty["significant"] is None
     clipped = paired_difference([0.0, 0.0, 0.0], [1.0, 1.0, 0.9], feasible_diff=(-0.5, 0.5))

@@ -108,18 +108,21 @@ def bench_tracker(
     return rows
 
 
+#: :func:`format_table` columns: (header, row key)
+TABLE_COLUMNS = (
+    ("P_T", "p_total"),
+    ("N", "n_agents"),
+    ("single ms/robot-step", "single_ms_per_robot_step"),
+    ("bank ms/robot-step", "bank_ms_per_robot_step"),
+)
+
+
 def format_table(rows: list[dict]) -> str:
-    """Plain-text table of :func:`bench_tracker` rows."""
+    """Plain-text table of :func:`bench_tracker` rows, drawn by the one table formatter of
+    the package, :func:`fov_marl.cli.format_table` (imported lazily: the CLI sits above
+    this module)."""
+    from fov_marl.cli import format_table as _format_table
 
-    def f(v):
-        return "-" if v is None else f"{v:.3f}"
-
-    lines = [
-        f"{'P_T':>6} {'N':>4} {'single ms/robot-step':>21} {'bank ms/robot-step':>19}",
-    ]
-    for r in rows:
-        lines.append(
-            f"{r['p_total']:>6} {r['n_agents']:>4} {f(r['single_ms_per_robot_step']):>21} "
-            f"{f(r['bank_ms_per_robot_step']):>19}"
-        )
-    return "\n".join(lines)
+    return _format_table(
+        [[r.get(k) for _, k in TABLE_COLUMNS] for r in rows], [h for h, _ in TABLE_COLUMNS]
+    )

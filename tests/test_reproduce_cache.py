@@ -1,0 +1,82 @@
+"""``fov-marl reproduce`` runs: per-(job, code) cache, resume, calibration probe, progress."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+import fov_marl.report as report
+from fov_marl.report import Job, _Progress, _run_all, _run_cached, plan, run_job
+
+
+def _job(seed: int = 0, **kw) -> Job:
+    base = dict(
+        scenario="coverage", policy="random", seed=seed, n_agents=2, max_cycles=5,
+        _group="t", _label="x", _keep="final", _probe=False,
+    )  # fmt: skip
+    base.update(kw)
+    return Job(**base)
+
+
+def test_cache_hits_misses_and_torn_files(tmp_path):
+    job = _job()
+    first, hit = _run_cached(job, tmp_path, "code-a")
+    assert not hit and first["record"]["steps"] == 5 and len(first["final_poses"]) == 2
+    again, hit = _run_cached(job, tmp_path, "code-a")
+    assert hit and again == json.loads(json.dumps(first))
+    # another code fingerprint or another argument is another entry
+    _, hit = _run_cached(job, tmp_path, "code-b")
+    assert not hit
+    _, hit = _run_cached(_job(seed=1), tmp_path, "code-a")
+    assert not hit
+    assert len(list(tmp_path.glob("*.json"))) == 3
+    # a torn file (interrupted write) is run again, not trusted
+    path = tmp_path / f"{report._job_key(job, 'code-a')}.json"
+    path.write_text('{"record": ')
+    redo, hit = _run_cached(job, tmp_path, "code-a")
+    assert not hit and redo["final_poses"] == first["final_poses"]  # timings differ
+    assert redo["record"]["eta_series"] == first["record"]["eta_series"]
+
+
+def test_an_interrupted_run_resumes_from_the_cache(tmp_path, monkeypatch):
+    jobs = [_job(seed=s) for s in range(3)]
+    _run_cached(jobs[0], tmp_path, "c")  # finished before the "interruption"
+    calls = []
+    real = report.run_job
+    monkeypatch.setattr(report, "run_job", lambda j: calls.append(j["seed"]) or real(j))
+    bar = _Progress(len(jobs), "test", enabled=False)
+    out = _run_all(jobs, 1, tmp_path, "c", bar)
+    assert calls == [1, 2] and bar.n == 3
+    assert [r["record"]["seed"] for r in out] == [0, 1, 2]
+
+
+def test_probe_records_calibration_per_step_and_leaves_the_episode_unchanged():
+    kw = dict(policy="pfcbf", n_agents=3, max_cycles=12, fov_deg=120.0)
+    probed = run_job(_job(**kw, _probe=True))
+    plain = run_job(_job(**kw))
+    cal = probed["calibration"]
+    assert set(cal) == {"detected", "undetected", "near_undetected", "a_undetected_m"}
+    assert all(len(v) == 12 for v in cal.values())
+    rates = np.asarray(cal["detected"] + cal["undetected"], float)
+    assert np.all((rates[np.isfinite(rates)] >= 0) & (rates[np.isfinite(rates)] <= 1))
+    # reading the estimates does not change the episode
+    assert probed["record"]["eta_series"] == plain["record"]["eta_series"]
+    assert probed["final_poses"] == plain["final_poses"]
+
+
+def test_plan_pairs_the_conditions_and_keeps_quick_small():
+    full, quick = plan(False), plan(True)
+    cov = [j for j in full["parallel"] if j["_group"] == "coverage"]
+    by = {}
+    for j in cov:
+        by.setdefault(j["_label"], []).append(j["seed"])
+    assert set(by) == {"pfcbf 120°", "pfcbf 360°", "ideal"}
+    assert all(v == list(range(20)) for v in by.values())  # same starts, 20 seeds
+    assert [j["n_agents"] for j in full["serial"][::2]] == [6, 9, 12, 24, 48, 100]
+    assert {j["arena_size_m"] for j in full["serial"] if j["n_agents"] == 24} == {80.0}
+    steps = sum(
+        j.get("max_cycles", j.get("max_steps", 1000)) * j.get("n_agents", 4)
+        for j in quick["parallel"] + quick["serial"]
+    )
+    assert steps < 20_000  # robot-steps: ~40 s on one core
