@@ -97,7 +97,7 @@ def _coverage_jobs(group: str, seeds: Sequence[int], sigma: float, steps: int) -
             _label=label,
             _keep="final",
             _probe=pol == "pfcbf",
-        )  # fmt: skip
+        )
         for label, pol, fov in CONDITIONS
         for s in seeds
     ]
@@ -113,72 +113,64 @@ def plan(quick: bool = False, seeds: int | None = None) -> dict[str, Any]:
     n_cov = seeds or (2 if quick else 20)
     n_lit = min(n_cov, 1 if quick else 10) if seeds is None else seeds
     steps = 250 if quick else 1000
-    sizes = {
+    sizes: dict[str, Any] = {
         "coverage_seeds": n_cov,
         "literal_seeds": n_lit,
         "coverage_steps": steps,
         "literal_steps": 150 if quick else 1000,
-        "scaling_n": [6, 12] if quick else [6, 9, 12, 24, 48, 100],
-        "scaling_seeds": 1 if quick else 2,
-        "scaling_steps": 40 if quick else 300,
+        # Table I: (N, seeds, steps); N > 12 in scaled arenas, one seed (24-100 robots)
+        "scaling": [(6, 1, 40), (12, 1, 40)]
+        if quick
+        else [(6, 2, 300), (9, 2, 300), (12, 2, 300), (24, 1, 200), (48, 1, 200), (100, 1, 150)],
         "crossing_seeds": 1 if quick else n_cov,
-        "dense_n": [24] if quick else [24, 48],
-        "dense_seeds": 1 if quick else 3,
-        "dense_steps": 60 if quick else 600,
+        # dense teams in the 40 m arena: (N, seeds, steps)
+        "dense": [(24, 1, 60)] if quick else [(24, 3, 600), (48, 2, 500)],
     }
+    sizes["scaling_n"] = [n for n, _, _ in sizes["scaling"]]
+    sizes["dense_n"] = [n for n, _, _ in sizes["dense"]]
     par: list[Job] = []
     par += _coverage_jobs("coverage", range(n_cov), REPRODUCE_SIGMA_M, steps)
     par += _coverage_jobs("literal", range(n_lit), 2.8, sizes["literal_steps"])
+    common = dict(policy="pfcbf", _probe=False)
     par += [
         Job(
             scenario="crossing",
-            policy="pfcbf",
             seed=s,
             _group="crossing",
             _label="pfcbf 120°",
             _keep="full",
-            _probe=False,
-        )  # fmt: skip
+            **common,
+        )
         for s in range(sizes["crossing_seeds"])
     ]
+    dense = dict(scenario="coverage", fov_deg=120.0, density_sigma_m=REPRODUCE_SIGMA_M, **common)
     par += [
         Job(
-            scenario="coverage",
-            policy="pfcbf",
             seed=s,
             n_agents=n,
-            fov_deg=120.0,
-            density_sigma_m=REPRODUCE_SIGMA_M,
-            max_cycles=sizes["dense_steps"],
+            max_cycles=st,
             _group="dense",
             _label=f"N={n}",
             _keep="final",
-            _probe=False,
-        )  # fmt: skip
-        for n in sizes["dense_n"]
-        for s in range(sizes["dense_seeds"])
+            **dense,
+        )
+        for n, k, st in sizes["dense"]
+        for s in range(k)
     ]
-    ser = []
-    for n in sizes["scaling_n"]:
-        arena = 40.0 if n <= 12 else round(40.0 * math.sqrt(n / 6.0), 3)
-        st = sizes["scaling_steps"] if n <= 24 else max(sizes["scaling_steps"] * 2 // 3, 1)
-        for s in range(sizes["scaling_seeds"]):
-            ser.append(
-                Job(
-                    scenario="coverage",
-                    policy="pfcbf",
-                    seed=s,
-                    n_agents=n,
-                    fov_deg=120.0,
-                    arena_size_m=arena,
-                    density_sigma_m=REPRODUCE_SIGMA_M,
-                    max_steps=st,
-                    _group="scaling",
-                    _label=f"N={n}",
-                    _keep=None,
-                    _probe=False,
-                )  # fmt: skip
-            )
+    ser = [
+        Job(
+            seed=s,
+            n_agents=n,
+            arena_size_m=40.0 if n <= 12 else round(40.0 * math.sqrt(n / 6), 3),
+            max_steps=st,
+            _group="scaling",
+            _label=f"N={n}",
+            _keep=None,
+            **dense,
+        )
+        for n, k, st in sizes["scaling"]
+        for s in range(k)
+    ]
     return {"parallel": par, "serial": ser, "sizes": sizes}
 
 
@@ -193,6 +185,21 @@ def _code_fingerprint() -> str:
         h.update(rel.encode())
         h.update(p.read_bytes())
     return h.hexdigest()
+
+
+def _git_state() -> dict[str, Any]:
+    """The commit the package was run from and the source files that differed from it
+    (so a report made from a working tree says so); empty outside a git checkout."""
+    import subprocess
+
+    root = Path(__file__).resolve().parent
+    try:
+        run = dict(cwd=root, capture_output=True, text=True, timeout=10)
+        head = subprocess.run(["git", "rev-parse", "HEAD"], **run).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "."], **run).stdout
+    except (OSError, subprocess.SubprocessError):
+        return {}
+    return {"commit": head, "modified": sorted(ln[3:] for ln in dirty.splitlines() if ln.strip())}
 
 
 def _job_key(job: Job, code: str) -> str:
@@ -416,10 +423,11 @@ def _coverage_analysis(
     for lab in by:
         v = [x for x in values(lab, "time_to_ideal_frac_s") if x is not None]
         summary[lab]["time_to_ideal_frac_s"] = {
-            "n": len(v), "missing": len(seeds) - len(v),
+            "n": len(v),
+            "missing": len(seeds) - len(v),
             "mean": float(np.mean(v)) if v else None,
             "std": float(np.std(v, ddof=1)) if len(v) > 1 else (0.0 if v else None),
-        }  # fmt: skip
+        }
     comps: dict[str, dict[str, Any]] = {}
     for a, b in COMPARISONS:
         if a not in by or b not in by:
@@ -525,6 +533,7 @@ def reproduce(
         "quick": quick,
         "sizes": p["sizes"],
         "code_fingerprint": code,
+        "git": _git_state(),
         "density_sigma_m": REPRODUCE_SIGMA_M,
         "eta_norm_threshold": ETA_NORM_THRESHOLD,
         "ideal_fraction": IDEAL_FRACTION,
@@ -551,13 +560,13 @@ def reproduce(
             "eta": {
                 lab: [r.eta_series for r, l2 in zip(recs, labels, strict=True) if l2 == lab]
                 for lab in dict.fromkeys(labels)
-            },  # fmt: skip
+            },
             "final_poses": {f"{j['_label']}|{j['seed']}": r["final_poses"] for j, r in jr},
             "calibration": [
                 r["calibration"]
                 for j, r in jr
                 if "calibration" in r and j["_label"] == "pfcbf 120°"
-            ],  # fmt: skip
+            ],
         }
     # calibration summary (pfcbf 120°, pooled over seeds and steps)
     cal = series["coverage"]["calibration"]
@@ -569,8 +578,10 @@ def reproduce(
         "summary": summarize(crecs),
         "episodes": [r.to_json(with_series=False) for r in crecs],
     }
-    series["crossing"] = {"trajectories": [r["trajectory"] for _, r in crs],
-                          "targets": [r["targets"] for _, r in crs]}  # fmt: skip
+    series["crossing"] = {
+        "trajectories": [r["trajectory"] for _, r in crs],
+        "targets": [r["targets"] for _, r in crs],
+    }
 
     drs = groups["dense"]
     drecs = _records(r for _, r in drs)
@@ -594,8 +605,10 @@ def reproduce(
         ],
         "episodes": [r.to_json(with_series=False) for r in drecs],
     }
-    series["dense"] = {f"N={n}": [r.min_distance_series for r in drecs if r.n_agents == n]
-                       for n in p["sizes"]["dense_n"]}  # fmt: skip
+    series["dense"] = {
+        f"N={n}": [r.min_distance_series for r in drecs if r.n_agents == n]
+        for n in p["sizes"]["dense_n"]
+    }
 
     srecs = _records(r for _, r in groups["scaling"])
     arenas = {j["n_agents"]: j.get("arena_size_m", 40.0) for j, _ in groups["scaling"]}
@@ -663,38 +676,62 @@ def _figures(out: Path, res: dict[str, Any], ser: dict[str, Any], base: Any) -> 
         fov = 360.0 if "360" in lab else 120.0
         cfg = base.replace(fov_deg=fov)
         poses = np.asarray(s_cov["final_poses"][f"{lab}|{seed0}"])
-        eta = next(e["final_eta"] for e in cov["episodes"]
-                   if e["condition"] == lab and e["seed"] == seed0)  # fmt: skip
+        eta = next(
+            e["final_eta"] for e in cov["episodes"] if e["condition"] == lab and e["seed"] == seed0
+        )
         plot_configuration(ax, cfg, poses, title=f"{lab}, seed {seed0}: η = {eta:.4f}", zoom_m=17.0)
     fig.suptitle("Final configurations: isotropic (left) vs anisotropic (right), paper Fig. 5")
     save(fig, "fig5_final_configurations.png", "fig5")
 
     # Fig. 6: η(t), raw and normalised, zoomed on the rise
     settle = [e["time_to_settle_s"] for e in cov["episodes"] if e["time_to_settle_s"] is not None]
-    t_max = float(min(res["sizes"]["coverage_steps"] * dt, max(60.0, np.quantile(settle, 0.9) + 10)
-                      if settle else 60.0))  # fmt: skip
+    t_max = float(
+        min(
+            res["sizes"]["coverage_steps"] * dt,
+            max(60.0, np.quantile(settle, 0.9) + 10) if settle else 60.0,
+        )
+    )
     fig, axes = plt.subplots(1, 3, figsize=(17, 4.8), gridspec_kw={"width_ratios": [1, 1, 0.8]})
     thr = ETA_NORM_THRESHOLD
-    plot_eta_bands(axes[0], s_cov["eta"], dt, t_max=t_max, y_min=0.3,
-                   thresholds=[(0.99, "η = 0.99 (paper)")])  # fmt: skip
+    plot_eta_bands(
+        axes[0], s_cov["eta"], dt, t_max=t_max, y_min=0.3, thresholds=[(0.99, "η = 0.99 (paper)")]
+    )
     axes[0].set_title(f"η(t), σ = {cov['density_sigma_m']:g} m: the rise")
-    plot_eta_bands(axes[1], s_cov["eta"], dt, scale=cov["eta_optimal"], t_max=t_max, y_min=0.88,
-                   thresholds=[(thr, f"{thr:g} η_opt"), (1.0, "η_opt")],
-                   ylabel="η / η_opt")  # fmt: skip
+    plot_eta_bands(
+        axes[1],
+        s_cov["eta"],
+        dt,
+        scale=cov["eta_optimal"],
+        t_max=t_max,
+        y_min=0.88,
+        thresholds=[(thr, f"{thr:g} η_opt"), (1.0, "η_opt")],
+        ylabel="η / η_opt",
+    )
     axes[1].set_ylim(0.88, 1.005)
     axes[1].set_title("normalised by η_opt, zoomed on the approach to the end")
-    per = {lab: [row[f"{lab}|time_to_eta_norm_s"] for row in cov["per_seed"]]
-           for lab in s_cov["eta"]}  # fmt: skip
-    plot_paired(axes[2], per, f"time to {thr:g} η_opt (s)",
-                title=f"paired seeds (n = {len(cov['seeds'])}); bar: mean")  # fmt: skip
+    per = {
+        lab: [row[f"{lab}|time_to_eta_norm_s"] for row in cov["per_seed"]] for lab in s_cov["eta"]
+    }
+    plot_paired(
+        axes[2],
+        per,
+        f"time to {thr:g} η_opt (s)",
+        title=f"paired seeds (n = {len(cov['seeds'])}); bar: mean",
+    )
     fig.suptitle("Coverage efficiency over time, mean ± 1 std (dotted: 10-90%), paper Fig. 6")
     save(fig, "fig6_eta.png", "fig6")
 
     # literal σ = 2.8 m η(t)
     lit = ser["literal"]
     fig, ax = plt.subplots(figsize=(6.5, 4.4))
-    plot_eta_bands(ax, lit["eta"], dt, t_max=min(60.0, res["sizes"]["literal_steps"] * dt),
-                   y_min=0.5, thresholds=[(0.99, "η = 0.99")])  # fmt: skip
+    plot_eta_bands(
+        ax,
+        lit["eta"],
+        dt,
+        t_max=min(60.0, res["sizes"]["literal_steps"] * dt),
+        y_min=0.5,
+        thresholds=[(0.99, "η = 0.99")],
+    )
     ax.set_title("η(t) at the literal density σ = 2.8 m")
     save(fig, "fig6b_eta_literal.png", "fig6b")
 
@@ -711,11 +748,16 @@ def _figures(out: Path, res: dict[str, Any], ser: dict[str, Any], base: Any) -> 
 
         fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
         plot_calibration(
-            axes[0], t,
-            {"detected": avg("detected"), "undetected": avg("undetected"),
-             "undetected, true distance ≤ 10 m": avg("near_undetected")},
-            ax_size=axes[1], size=avg("a_undetected_m"),
-        )  # fmt: skip
+            axes[0],
+            t,
+            {
+                "detected": avg("detected"),
+                "undetected": avg("undetected"),
+                "undetected, true distance ≤ 10 m": avg("near_undetected"),
+            },
+            ax_size=axes[1],
+            size=avg("a_undetected_m"),
+        )
         axes[0].set_title(f"PF calibration, pfcbf 120°, mean over {len(cal)} seeds")
         save(fig, "fig_calibration.png", "calibration")
 
@@ -727,8 +769,13 @@ def _figures(out: Path, res: dict[str, Any], ser: dict[str, Any], base: Any) -> 
     for i in range(k):
         ax = axes[0, i]
         ep = res["crossing"]["episodes"][i]
-        plot_trajectories(ax, ccfg, np.asarray(trajs[i]), targets=np.asarray(targets[i]),
-                          title=f"seed {ep['seed']}: min dist {ep['min_distance']:.2f} m")  # fmt: skip
+        plot_trajectories(
+            ax,
+            ccfg,
+            np.asarray(trajs[i]),
+            targets=np.asarray(targets[i]),
+            title=f"seed {ep['seed']}: min dist {ep['min_distance']:.2f} m",
+        )
         c = ccfg.arena_size_m / 2
         ax.set_xlim(c - 15, c + 15)
         ax.set_ylim(c - 15, c + 15)
@@ -869,7 +916,14 @@ def _markdown(res: dict[str, Any]) -> str:
         f"{' --quick' if res['quick'] else ''}`; runs {res['runs_elapsed_s'] / 60:.1f} min, "
         f"total {res['elapsed_s'] / 60:.1f} min. Every number below is in `results.json` (the "
         "key is named under each table); per-step series behind the figures are in "
-        "`series.json`; each run is cached in `cache/` (keyed on its arguments and the code).",
+        "`series.json`; each run is cached in `cache/` (keyed on its arguments and the code). "
+        f"Code: commit `{res.get('git', {}).get('commit', '?')[:12]}`"
+        + (
+            f", with uncommitted changes to {', '.join(f'`{m}`' for m in res['git']['modified'])}"
+            if res.get("git", {}).get("modified")
+            else ""
+        )
+        + f" (source fingerprint `{res['code_fingerprint'][:12]}`).",
         "",
         "**Reading of the paper's η = 1.** The paper's η (Eq. 21) is the density mass inside the "
         "union of the sensing disks, and it reports both teams reaching η = 1. Literally that "
