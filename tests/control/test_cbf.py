@@ -28,9 +28,10 @@ from fov_marl.control.params import ControllerParams
 from fov_marl.geometry import in_fov, integrate_unicycle, rotation, world_to_body
 
 BETAS = (60.0, 120.0, 200.0, 360.0)
-PRM = ControllerParams()
+# the recovery-by-turning rows of ``fov_translation="all"`` (rows in view untouched)
+PRM = ControllerParams(fov_translation="all")
 #: the rows exactly as in the paper (Eq. 12 at the mean, α uncapped)
-PAPER_ROWS = ControllerParams(fov_recovery_cap=0.0)
+PAPER_ROWS = ControllerParams(fov_recovery_cap=0.0, fov_translation="all")
 
 
 def _cfg(beta: float = 120.0):
@@ -381,7 +382,13 @@ def test_safety_speed_margin_tightens_only_the_safety_row():
     p = np.array([[3.0, 4.0]])
     v = np.zeros((1, 2))
     r0 = cbf_rows(p, v, np.array([1.0]), cfg, PRM)
-    r1 = cbf_rows(p, v, np.array([1.0]), cfg, ControllerParams(safety_speed_margin_mps=0.5))
+    r1 = cbf_rows(
+        p,
+        v,
+        np.array([1.0]),
+        cfg,
+        ControllerParams(safety_speed_margin_mps=0.5, fov_translation="all"),
+    )
     np.testing.assert_allclose(r0.b[0, SAFETY_ROW] - r1.b[0, SAFETY_ROW], 2 * 5.0 * 0.5)
     np.testing.assert_allclose(r0.b[0, [0, 1, 3]], r1.b[0, [0, 1, 3]])
 
@@ -418,3 +425,24 @@ def test_controller_params_border_class_k_must_not_vanish():
     with pytest.raises(ConfigError, match="alpha_border"):
         ControllerParams(alpha_border_gain=0.0, alpha_border_cubic=0.0)
     ControllerParams(alpha_border_gain=0.0, alpha_border_cubic=1.0)  # the authors' pure cubic
+
+
+@pytest.mark.parametrize("mode", ["none", "seen"])
+def test_fov_translation_none_and_seen_keep_only_rotation_terms(mode):
+    """``fov_translation="none"`` (default): every FoV row of every neighbour is reduced to
+    its rotation term; ``"seen"``: those of undetected neighbours only. The safety row is
+    never touched."""
+    cfg = _cfg(120.0)
+    p = np.array([[3.0, 0.2], [6.0, -2.0], [-4.0, 3.0]])
+    v = np.zeros((3, 2))
+    d = np.array([0.0, 1.0, 0.5])
+    det = np.array([True, False, False])
+    rows = cbf_rows(p, v, d, cfg, ControllerParams(fov_translation=mode), detected=det)
+    full = cbf_rows(p, v, d, cfg, PRM, detected=det)
+    fov = [0, 1, 3]
+    reduced = np.ones(3, bool) if mode == "none" else ~det
+    assert np.all(rows.A[reduced][:, fov, 0:2] == 0.0)
+    if mode == "seen":
+        np.testing.assert_array_equal(rows.A[0], full.A[0])
+    np.testing.assert_array_equal(rows.A[:, 2], full.A[:, 2])
+    np.testing.assert_array_equal(rows.b[:, 2], full.b[:, 2])

@@ -250,9 +250,16 @@ def test_hard_neighbour_stays_in_view_while_u_star_turns_away():
 
 
 def test_hard_neighbour_stays_in_view_while_u_star_backs_away():
-    """A large ellipse keeps d = 0: backing off and turning, j stays in view and in range."""
+    """A large ellipse keeps d = 0: backing off and turning, j stays in view and in range
+    (with the paper's translating FoV rows, ``fov_translation="all"``)."""
     log = _run_pair(
-        lambda *_: np.array([-1.0, 0.0, 1.0]), (20, 20, 0), (23, 20.5, 0), (0, 0), 12.0, 150
+        lambda *_: np.array([-1.0, 0.0, 1.0]),
+        (20, 20, 0),
+        (23, 20.5, 0),
+        (0, 0),
+        12.0,
+        150,
+        ControllerParams(fov_translation="all"),
     )
     assert _seen(log).all()
     assert max(math.hypot(*p) for p, _, _ in log) <= CFG.detection_range_m + 1e-6
@@ -351,7 +358,9 @@ def test_motion_cone_yields_to_the_safety_rows():
 
 def test_motion_cone_levels_and_reporting():
     """The cone is level 1 (FoV levels shift below it); no cone without neighbours or at 360°."""
-    prm = ControllerParams(motion_cone=True, prune=False, safety_model="mean")
+    prm = ControllerParams(
+        motion_cone=True, prune=False, safety_model="mean", fov_translation="all"
+    )
     ctrl = FovCbfController(CFG, prm)
     res = ctrl.solve(
         np.array([0.0, 1.0, 0.0]), np.array([[4.0, 0.5]]), np.zeros((1, 2)), np.zeros(1)
@@ -363,3 +372,16 @@ def test_motion_cone_levels_and_reporting():
         np.array([0.0, 1.0, 0.0]), np.array([[4.0, 0.5]]), np.zeros((1, 2)), np.zeros(1)
     )
     assert res.u[1] > 0.9 and res.cone_violation == 0.0
+
+
+def test_default_fov_levels_turn_the_camera_and_leave_translation_to_u_star():
+    """Default ``fov_translation="none"``: a hard neighbour (d = 0) while u* backs away and
+    sideways: the robot backs off exactly as u* asks (the FoV levels never brake or drive
+    it) and turns to keep the neighbour in view."""
+    u = lambda *_: np.array([-0.1, 0.9, 0.0])  # noqa: E731
+    log = _run_pair(u, (20, 20, 0), (23, 19, 0), (0, 0), 12.0, 40)
+    for _, _, r in log:
+        np.testing.assert_allclose(r.u[:2], [-0.1, 0.9], atol=1e-6)
+    assert _seen(log).all()
+    turned = sum(r.u[2] for _, _, r in log) * CFG.dt_s
+    assert turned < -0.05  # it turned right, towards j (which falls behind on its right)

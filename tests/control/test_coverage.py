@@ -18,6 +18,7 @@ from fov_marl.control.coverage import (
     coverage_desired_inputs,
     crossing_desired_input,
     facing_omega,
+    lloyd_deadband_scale,
     lloyd_stencil,
 )
 from fov_marl.geometry import rotation, world_to_body
@@ -85,7 +86,7 @@ def test_desired_input_points_at_the_centroid_in_body_frame():
         des = coverage_desired_input(pose, world_to_body(nbw, pose), CFG, PRM)
         g_body = rotation(yaw).T @ (des.goal_world - p)
         v = des.u_star[:2]
-        expect = PRM.kp_coverage * g_body
+        expect = PRM.kp_coverage * g_body * lloyd_deadband_scale(np.hypot(*g_body), PRM)
         if np.hypot(*expect) > CFG.v_max_mps:
             expect *= CFG.v_max_mps / np.hypot(*expect)
         np.testing.assert_allclose(v, expect, atol=1e-12)
@@ -160,3 +161,14 @@ def test_crossing_law_and_facing_omega():
     assert near[2] == pytest.approx(PRM.k_omega * math.pi / 4 * dist / PRM.face_distance_m)
     behind = facing_omega(np.array([[-5.0, 0.1], [-5.0, -0.1]]), CFG, PRM)
     np.testing.assert_allclose(behind, [CFG.omega_max_radps, -CFG.omega_max_radps])
+
+
+def test_lloyd_dead_band_is_continuous_and_zero_near_the_centroid():
+    prm = ControllerParams(lloyd_deadband_m=0.3)
+    d = np.array([0.0, 0.1, 0.3, 0.31, 1.0, 5.0])
+    f = lloyd_deadband_scale(d, prm)
+    np.testing.assert_allclose(f[:3], 0.0)
+    np.testing.assert_allclose(d[3:] * f[3:], d[3:] - 0.3)  # the error shrinks by the band
+    np.testing.assert_array_equal(
+        lloyd_deadband_scale(d, ControllerParams(lloyd_deadband_m=0.0)), 1.0
+    )
