@@ -444,6 +444,10 @@ _GL_NODES = np.polynomial.legendre.leggauss(_GL_ORDER)
 _SATURATED = 1.0 - 1e-6
 #: Starts polished to the full tolerance after a loose first pass over all of them.
 _POLISH = 4
+#: Teams above this size get fewer starts (4 lattices and two rings, 2 random), 100
+#: first-pass iterations and 2 polished starts, so a large unsaturated team costs seconds
+#: (measured: N = 24, σ = 8 m ~4 s; N = 50, σ = 20 m ~15 s on the shared 2-core machine).
+_SMALL_TEAM = 12
 
 
 def union_eta_continuous(
@@ -473,7 +477,8 @@ def union_eta_continuous(
 
     Accuracy: the integrand is smooth on every sub-arc; against the slow grid reference
     at a 0.02 m cell the difference is at the reference's own midpoint error
-    (~1e-5, tests/test_metrics.py). Cost ``O(N² · (2N + 40))``; ~0.3 ms at N = 6.
+    (~1e-5, tests/test_metrics.py). Cost ``O(N k (2k + 40))`` with k the most disks within
+    2R of one disk; ~0.5 ms at N = 6.
 
     Args:
         positions_world: ``(N, 2)`` disk centres (m).
@@ -494,12 +499,21 @@ def union_eta_continuous(
     mx, my = (float(v) for v in config.density_mean_m)
     Z = gaussian_mass_in_arena(config)
 
-    # ---- breakpoints θ ∈ [0, 2π] on every circle: (N, K)
+    # ---- neighbours: only disks closer than 2R cut or cover circle i; (N, k) padded
     two_pi = 2.0 * math.pi
+    idx = np.arange(n)
+    d_all = p[None, :, :] - p[:, None, :]  # d[i, j] = p_j - p_i
+    dist_all = np.sqrt(np.einsum("ijk,ijk->ij", d_all, d_all))
+    near = (dist_all < 2.0 * R) & (idx[:, None] != idx[None, :])
+    k = int(near.sum(axis=1).max()) if n > 1 else 0
+    J = np.argsort(~near, axis=1, kind="stable")[:, :k]  # neighbour indices first
+    valid = np.take_along_axis(near, J, axis=1)  # (N, k)
+    d = np.take_along_axis(d_all, J[..., None], axis=1)  # (N, k, 2)
+    dist = np.take_along_axis(dist_all, J, axis=1)
+
+    # ---- breakpoints θ ∈ [0, 2π] on every circle: (N, K)
     fixed = np.broadcast_to(np.linspace(0.0, two_pi, _ARC_SPLITS + 1), (n, _ARC_SPLITS + 1))
-    d = p[None, :, :] - p[:, None, :]  # d[i, j] = p_j - p_i
-    dist = np.sqrt(np.einsum("ijk,ijk->ij", d, d))
-    cut = (dist > 1e-12) & (dist < 2.0 * R)
+    cut = valid & (dist > 1e-12)
     alpha = np.arctan2(d[..., 1], d[..., 0])
     gamma = np.arccos(np.clip(dist / (2.0 * R), 0.0, 1.0))
     circ = np.where(cut[..., None], np.stack([alpha - gamma, alpha + gamma], -1), np.nan)
@@ -525,13 +539,12 @@ def union_eta_continuous(
     tm = 0.5 * (a + b)
     mxy = p[:, None, :] + R * np.stack([np.cos(tm), np.sin(tm)], -1)  # (N, K-1, 2)
     inside_q = np.all((mxy >= 0.0) & (mxy <= L), axis=-1)
-    e = mxy[:, :, None, :] - p[None, None, :, :]  # (N, K-1, N, 2)
-    in_other = np.einsum("ikjc,ikjc->ikj", e, e) < R * R
-    idx = np.arange(n)
+    e = mxy[:, :, None, :] - p[J][:, None, :, :]  # (N, K-1, k, 2)
+    in_other = (np.einsum("ikjc,ikjc->ikj", e, e) < R * R) & valid[:, None, :]
     # coincident disks: the earlier one covers the later one's circle, never the reverse
     # (the round-off of |q − p_j|² against R² on a shared circle must not decide it)
-    same = dist <= 1e-12
-    in_other = np.where(same[:, None, :], (idx[None, :] < idx[:, None])[:, None, :], in_other)
+    same = valid & (dist <= 1e-12)
+    in_other = np.where(same[:, None, :], (J < idx[:, None])[:, None, :], in_other)
     keep = inside_q & ~in_other.any(axis=-1) & (b > a)
 
     # ---- Gauss-Legendre nodes on the kept sub-arcs only: (M, G)
@@ -618,10 +631,11 @@ def _starts(
     """Initial configurations around the origin (the density mean): hexagonal lattices,
     ``1 + (n − 1)`` and ``k + (n − k)`` rings, one ring of ``n``, and seeded random ones."""
     out: list[tuple[str, np.ndarray]] = []
+    small = n <= _SMALL_TEAM
     for name, off in (("hex", (0.0, 0.0)), ("hex-tri", (1 / 3, 1 / 3)), ("hex-edge", (0.5, 0.0))):
-        for sc in (0.85, 1.0):
+        for sc in (0.85, 1.0) if small else (0.85,):
             out.append((f"{name}x{sc:g}", _hex_points(n, sc * math.sqrt(3) * R, np.asarray(off))))
-    if n >= 2:
+    if 2 <= n <= _SMALL_TEAM:
         for rho in (0.9 * R, 1.3 * R, 1.7 * R):
             out.append(
                 (f"ring1+{n - 1}@{rho / R:.1f}R", np.vstack([[0.0, 0.0], _ring(n - 1, rho)]))
@@ -641,7 +655,7 @@ def _starts(
 
 
 def optimal_eta_solution(
-    config: ScenarioConfig, n_random: int = 6, seed: int = 0, tol: float = 1e-9
+    config: ScenarioConfig, n_random: int | None = None, seed: int = 0, tol: float = 1e-9
 ) -> OptimalEta:
     """Best η (Eq. 21) that ``config.n_agents`` sensing disks of radius R_s can reach.
 
@@ -651,7 +665,8 @@ def optimal_eta_solution(
     starts around q_m: triangular (hexagonal-covering) lattices of spacing √3 R and
     0.85 √3 R with three offsets, one disk at q_m with the others on a ring (three
     radii), all on one ring, two rings for N ≥ 8, and ``n_random`` seeded random
-    starts. Every optimised configuration is then measured with the env's own
+    starts (above 12 robots: three lattices, two rings, two random; see
+    ``_SMALL_TEAM``). Every optimised configuration is then measured with the env's own
     quadrature (:class:`CoverageMetric`, the same numbers as ``final_eta``) and the
     best of those is returned, so ``final_eta / eta`` compares like with like.
 
@@ -667,13 +682,16 @@ def optimal_eta_solution(
     Args:
         config: uses ``n_agents``, ``arena_size_m``, ``sensing_radius_m``,
             ``density_mean_m``, ``density_sigma_m``, ``eta_grid_m``.
-        n_random: number of random starts.
+        n_random: number of random starts (default 6, or 2 above 12 robots).
         seed: seeds the random starts and the symmetry-breaking jitter.
         tol: L-BFGS-B ``ftol``.
     """
     from scipy.optimize import minimize
 
     n = int(config.n_agents)
+    small = n <= _SMALL_TEAM
+    if n_random is None:
+        n_random = 6 if small else 2
     R, L = float(config.sensing_radius_m), float(config.arena_size_m)
     q = np.asarray(config.density_mean_m, dtype=np.float64)
     metric = CoverageMetric(config)
@@ -704,10 +722,11 @@ def optimal_eta_solution(
         return 1.0 - float(res.fun), res.x.reshape(n, 2)
 
     # phase 1: every start, loosely; phase 2: the best few to ``tol``
-    rough = sorted(((*run(x, 1e-6, 200), nm) for nm, x in starts), key=lambda t: -t[0])
+    iters, polish = (200, _POLISH) if small else (100, 2)
+    rough = sorted(((*run(x, 1e-6, iters), nm) for nm, x in starts), key=lambda t: -t[0])
     found = []
     for k, (e, xs, nm) in enumerate(rough):
-        if k < _POLISH:
+        if k < polish:
             e, xs = run(xs, tol, 500)
         found.append((e, metric.eta(xs), nm, xs))
     found.sort(key=lambda t: -t[0])
