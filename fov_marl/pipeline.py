@@ -90,6 +90,15 @@ class PfCbfPipeline:
         self.n = config.n_agents
         self.agents = [f"robot_{i}" for i in range(self.n)]
         self.layouts = [ObservationLayout(self.n, i) for i in range(self.n)]
+        if tracker_params is not None and not isinstance(tracker_params, TrackerParams):
+            raise ValueError(
+                f"tracker_params must be a TrackerParams or None, got {type(tracker_params).__name__}"
+            )
+        if controller_params is not None and not isinstance(controller_params, ControllerParams):
+            raise ValueError(
+                "controller_params must be a ControllerParams or None, "
+                f"got {type(controller_params).__name__}"
+            )
         self.tracker_params = tracker_params if tracker_params is not None else TrackerParams()
         self.controller_params = (
             controller_params if controller_params is not None else ControllerParams()

@@ -89,7 +89,7 @@ class SyntheticTracker:
         """Robot i's view: ``ids, mean_body (M, 2), v_est_body (M, 2), d (M,)``."""
         cfg = self.config
         n = self.est_world.shape[0]
-        ids = np.array([j for j in range(n) if j != i])
+        ids = np.array([j for j in range(n) if j != i], dtype=np.int64)
         mean_w = self.est_world[i, ids]
         mean_b = world_to_body(mean_w, pose_i)
         qm_b = world_to_body(np.asarray(cfg.density_mean_m), pose_i)

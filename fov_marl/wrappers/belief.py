@@ -83,6 +83,7 @@ from pettingzoo.utils.wrappers import BaseParallelWrapper
 from fov_marl.estimation import TrackerBank
 from fov_marl.estimation.params import TrackerParams
 from fov_marl.geometry import chi2_2dof
+from fov_marl.validation import ConfigError, check_keys, check_real, describe
 
 __all__ = [
     "FEATURE_NAMES",
@@ -133,21 +134,16 @@ class BeliefFeaturizer:
     ) -> None:
         if init not in _INITS:
             raise ValueError(f"init must be one of {_INITS}, got {init!r}")
-        try:
-            cap = float(time_cap_s)
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"time_cap_s must be a real number in (0, inf), got {time_cap_s!r}"
-            ) from None
-        if not math.isfinite(cap) or cap <= 0.0:
-            raise ValueError(f"time_cap_s must be in (0, inf) s, got {time_cap_s!r}")
+        cap = check_real("time_cap_s", time_cap_s, 0.0, 1e9, lo_open=True)
+        if tracker_params is not None and not isinstance(tracker_params, Mapping):
+            raise ConfigError(
+                "tracker_params must be a dict of TrackerParams fields or None, "
+                f"got {describe(tracker_params)}"
+            )
         params = {**_DEFAULT_TRACKER, **dict(tracker_params or {})}
         if "init_mode" in params:
             raise ValueError("set the initialisation with init=, not tracker_params['init_mode']")
-        valid = set(TrackerParams.__dataclass_fields__)
-        unknown = sorted(set(params) - valid)
-        if unknown:
-            raise ValueError(f"unknown tracker_params field(s) {unknown}; valid: {sorted(valid)}")
+        check_keys("tracker_params fields", params, TrackerParams.__dataclass_fields__)
         self.env = env
         self.config = env.unwrapped.config
         self.init = init

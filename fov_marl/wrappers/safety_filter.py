@@ -69,12 +69,15 @@ from fov_marl.envs.rendering import draw_beliefs
 from fov_marl.estimation import TrackerParams
 from fov_marl.pipeline import PfCbfPipeline
 from fov_marl.spaces import action_to_velocity
+from fov_marl.validation import check_int, check_params
 
-__all__ = ["SafetyFilterWrapper", "FILTER_CONTROLLER_DEFAULTS"]
+__all__ = ["SafetyFilterWrapper", "FILTER_CONTROLLER_DEFAULTS", "FILTER_TRACKER_DEFAULTS"]
 
 #: Controller settings of the filter that differ from :class:`ControllerParams`'s
 #: defaults (module docstring); ``controller_params`` dicts are applied on top.
 FILTER_CONTROLLER_DEFAULTS: dict[str, Any] = {"deadlock_turn_deg": 0.0}
+#: Tracker settings of the filter that differ from :class:`TrackerParams`'s defaults.
+FILTER_TRACKER_DEFAULTS: dict[str, Any] = {"motion_model": "static"}
 
 
 class SafetyFilterWrapper(BaseParallelWrapper):
@@ -106,16 +109,15 @@ class SafetyFilterWrapper(BaseParallelWrapper):
                 "SafetyFilterWrapper needs a fov_marl environment (with .config and .poses), "
                 f"got {type(base).__name__}"
             )
-        if tracker_params is None:
-            tracker_params = TrackerParams(motion_model="static")
-        elif isinstance(tracker_params, dict):
-            tracker_params = TrackerParams(**{"motion_model": "static", **tracker_params})
-        if controller_params is None:
-            controller_params = ControllerParams(**FILTER_CONTROLLER_DEFAULTS)
-        elif isinstance(controller_params, dict):
-            controller_params = ControllerParams(
-                **{**FILTER_CONTROLLER_DEFAULTS, **controller_params}
-            )
+        tracker_params = check_params(
+            "tracker_params", tracker_params, TrackerParams, FILTER_TRACKER_DEFAULTS
+        )
+        controller_params = check_params(
+            "controller_params", controller_params, ControllerParams, FILTER_CONTROLLER_DEFAULTS
+        )
+        n = base.config.n_agents
+        if draw_robot is not None:
+            check_int("draw_robot", draw_robot, 0, n - 1, note="or None")
         self.config = base.config
         self.pipeline = PfCbfPipeline(
             base.config,
