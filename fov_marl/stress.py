@@ -457,9 +457,11 @@ def _csv(conv: Callable[[str], Any], allowed: Sequence[Any] | None = None):
     """argparse type: a comma-separated list of ``conv`` values (argparse names the flag)."""
 
     def parse(s: str) -> list[Any]:
-        items = [x.strip() for x in s.split(",") if x.strip()]
-        if not items:
+        items = [x.strip() for x in s.split(",")]
+        if not any(items):
             raise argparse.ArgumentTypeError(f"needs a comma-separated list, got {s!r}")
+        if not all(items):
+            raise argparse.ArgumentTypeError(f"has an empty item in {s!r}")
         out = []
         for x in items:
             try:
