@@ -85,6 +85,8 @@ class EpisodeRecord:
     tolerance at the end), ``arrived_ever``, ``time_to_arrival_s`` (all arrived at once),
     ``mean_time_to_arrive_s`` (mean over the robots that arrived of their first
     arrival). ``safety_violations`` counts D_s violation events (a pair entering D_s).
+    ``eta_series`` and ``min_distance_series`` hold one value at reset and one per step
+    (sample k at ``k · dt_s``).
     None marks what does not apply or never happened.
     """
 
@@ -193,6 +195,7 @@ def run_episode(
     m = infos[env.possible_agents[0]]["metrics"]
     if "eta" in m:
         eta_series.append(m["eta"])
+    mind_series.append(float(m["min_distance"]))
     if record_trajectory:
         traj.append(env.unwrapped.poses.tolist())
     arrival_t = None

@@ -267,7 +267,7 @@ def plot_min_distance(
     seeds (solid) and the mean (dashed), with D_s and the collision distance."""
     for k, (label, series) in enumerate(curves.items()):
         arr = _stack(series)
-        t = (np.arange(arr.shape[1]) + 1) * dt
+        t = np.arange(arr.shape[1]) * dt  # sample 0 at reset
         c = f"C{k}"
         ax.plot(t, arr.min(0), color=c, lw=1.2, label=f"{label}: min over {len(series)} seeds")
         ax.plot(t, arr.mean(0), "--", color=c, lw=0.8, label=f"{label}: mean")

@@ -387,7 +387,7 @@ def _time_to_fraction_of(rec: EpisodeRecord, ref: float, dt: float) -> float | N
     return time_to_eta(rec.eta_series, dt, min(IDEAL_FRACTION * ref, 1.0)) if ref > 0 else None
 
 
-#: Measures of the paired comparison: key -> (label, unit, feasible range of a − b).
+#: Measures of the paired comparison: record key -> (label, unit).
 MEASURES = {
     "time_to_eta_norm_s": (f"time to η ≥ {ETA_NORM_THRESHOLD:g} η_opt", "s"),
     "time_to_ideal_frac_s": (f"time to η ≥ {IDEAL_FRACTION:g} × ideal's final η (same seed)", "s"),

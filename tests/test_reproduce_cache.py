@@ -80,3 +80,16 @@ def test_plan_pairs_the_conditions_and_keeps_quick_small():
         for j in quick["parallel"] + quick["serial"]
     )
     assert steps < 20_000  # robot-steps: ~40 s on one core
+
+
+def test_progress_falls_back_to_a_plain_line_without_tqdm(monkeypatch, capsys):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "tqdm", None)  # import tqdm -> ImportError
+    bar = _Progress(2, "reproduce")
+    assert bar.bar is None
+    bar.update("a")
+    bar.update("b")
+    bar.close()
+    err = capsys.readouterr().err
+    assert "2/2 runs" in err and err.endswith("\n")
