@@ -15,6 +15,11 @@ Pure functions on flat particle arrays. Conventions used throughout:
 
 Nothing here draws random numbers: draws are passed in, so the caller controls the
 order of draws of each robot's Generator.
+
+Mode mixture (``motion_model="mixture"``): each particle also carries a discrete mode
+``(F,)`` int8 (:data:`MODE_STATIC`, :data:`MODE_COVERAGE`, :data:`MODE_CROSSING`,
+:data:`MODE_CV`) and a velocity state ``vx, vy`` (F,) in Σ_i (m/s); see
+:func:`mixture_predict`.
 """
 
 from __future__ import annotations
@@ -39,7 +44,25 @@ __all__ = [
     "allocate_budget",
     "systematic_resample_indices",
     "equal_split",
+    "MODE_STATIC",
+    "MODE_COVERAGE",
+    "MODE_CROSSING",
+    "MODE_CV",
+    "MODE_NAMES",
+    "mode_cdf",
+    "stratified_modes",
+    "clip_speed",
+    "fresh_velocity",
+    "switch_modes",
+    "mixture_predict",
+    "rotate_velocity",
 ]
+
+#: Mode indices of the mixture motion model (the order of ``mode_probs`` and of the
+#: ``mode_prior_*`` parameters).
+MODE_STATIC, MODE_COVERAGE, MODE_CROSSING, MODE_CV = 0, 1, 2, 3
+#: Names of the modes, by index.
+MODE_NAMES = ("static", "coverage", "crossing", "cv")
 
 _TWO_PI = 2.0 * math.pi
 _INV_TWO_PI = 1.0 / _TWO_PI
@@ -136,6 +159,198 @@ def crossing_input(x: np.ndarray, y: np.ndarray, v_max: float) -> tuple[np.ndarr
     r = np.sqrt(x * x + y * y)
     s = -0.5 * v_max / np.maximum(r, 1e-9)
     return s * x, s * y
+
+
+def mode_cdf(prior: np.ndarray) -> np.ndarray:
+    """``(4,)`` cumulative mode distribution from non-negative prior weights (normalised;
+    the last entry is exactly 1, so a uniform in [0, 1) always finds a mode)."""
+    p = np.asarray(prior, dtype=np.float64)
+    c = np.cumsum(p / p.sum())
+    c[-1] = 1.0
+    return c
+
+
+def stratified_modes(local_index: np.ndarray, block_len: np.ndarray, cdf: np.ndarray) -> np.ndarray:
+    """Deterministic mode assignment of a fresh cloud: the k-th of n particles of a block
+    gets the mode whose cumulative prior first exceeds ``(k + ½) / n`` (every block holds
+    each mode in proportion to the prior, to within one particle; no random draws).
+
+    Args:
+        local_index: ``(F,)`` index k of each particle inside its block.
+        block_len: ``(F,)`` size n of each particle's block.
+        cdf: ``(4,)`` from :func:`mode_cdf`.
+
+    Returns:
+        ``(F,)`` int8 modes.
+    """
+    q = (np.asarray(local_index, dtype=np.float64) + 0.5) / np.asarray(block_len)
+    return np.searchsorted(cdf, q, side="right").astype(np.int8)
+
+
+def clip_speed(vx: np.ndarray, vy: np.ndarray, v_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """Scale ``(vx, vy)`` down to norm ``v_max`` where it is longer (like the env's action
+    mapping)."""
+    f = _speed_factor(vx, vy, v_max)
+    return vx * f, vy * f
+
+
+def _speed_factor(vx: np.ndarray, vy: np.ndarray, v_max: float) -> np.ndarray:
+    """``min(1, v_max / ‖v‖)`` (1 at v = 0)."""
+    f = vx * vx
+    f += vy * vy
+    f += 1e-300  # no division by zero; sqrt(1e-300) = 1e-150 keeps f = 1 below
+    np.sqrt(f, out=f)
+    np.divide(v_max, f, out=f)
+    np.minimum(f, 1.0, out=f)
+    return f
+
+
+def fresh_velocity(
+    nx: np.ndarray,
+    ny: np.ndarray,
+    v_max: float,
+    h: np.ndarray | float = 0.0,
+    forward_bias: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A velocity drawn afresh for the constant-velocity mode.
+
+    In the particle's own heading frame ``v = v_max (b + n_x, n_y)`` with ``n`` a standard
+    normal pair and ``b`` the forward bias, shrunk to norm v_max, then rotated by the
+    particle's relative heading ``h`` into Σ_i. ``b = 0``: a uniform direction, full speed
+    with probability ``e^{−1/2} ≈ 0.61``; larger ``b``: mostly forward at full speed
+    (robots drive where they look).
+    """
+    fx, fy = clip_speed(v_max * (forward_bias + nx), v_max * ny, v_max)
+    c, s = np.cos(h), np.sin(h)
+    return c * fx - s * fy, s * fx + c * fy
+
+
+def switch_modes(
+    mode: np.ndarray, u: np.ndarray, p_switch: float, cdf: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Markov mode switching of the mixture (one uniform per particle).
+
+    With probability ``p_switch`` a particle's mode is redrawn from the prior (it may
+    redraw the same mode): ``P(m → m') = (1 − p) δ_{mm'} + p π_{m'}``. The uniform ``u``
+    decides both: ``u < p`` switches, and then ``u / p`` (uniform in [0, 1) given the
+    switch) picks the new mode by inverse CDF.
+
+    Args:
+        mode: ``(...)`` int8 modes; u: ``(...)`` uniforms in [0, 1).
+        p_switch: per-step probability in [0, 1].
+        cdf: ``(4,)`` cumulative prior.
+
+    Returns:
+        ``(new_mode (...) int8, switched (...) bool)``.
+    """
+    switched = u < p_switch
+    new = mode.copy()
+    if p_switch > 0.0:
+        new[switched] = np.searchsorted(cdf, u[switched] / p_switch, side="right")
+    return new, switched
+
+
+def mixture_predict(
+    x: np.ndarray,
+    y: np.ndarray,
+    h: np.ndarray,
+    vx: np.ndarray,
+    vy: np.ndarray,
+    mode: np.ndarray,
+    u_switch: np.ndarray,
+    noise: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    qx: np.ndarray,
+    qy: np.ndarray,
+    *,
+    dt: float,
+    p_switch: float,
+    cdf: np.ndarray,
+    k_p: float,
+    v_max: float,
+    standoff_m: float,
+    sig_pos_by_mode: np.ndarray,
+    sig_vel: float,
+    forward_bias: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One prediction step (Eq. 2, neighbour part) of the mode-mixture motion model.
+
+    Per particle, in the old Σ_i: (1) the mode switches (:func:`switch_modes`); (2) the
+    particle's velocity over the step is its mode's:
+
+    * ``static``: 0 (a random walk: position noise only);
+    * ``coverage``: Eq. 20 with standoff and saturation (:func:`coverage_input`);
+    * ``crossing``: Eq. 22, ``v_max / 2`` towards robot i (:func:`crossing_input`);
+    * ``cv``: the particle's velocity state plus a random walk,
+      ``v + σ_v n_v`` shrunk to norm v_max; a particle that has just switched (into
+      ``cv``) takes a fresh velocity ``v_max n_v`` shrunk to v_max instead
+      (:func:`fresh_velocity`): a robot changing behaviour may start in any direction;
+
+    (3) it moves ``p + dt v + σ_pos[mode] n_p``; (4) its velocity state becomes the
+    velocity it moved with (so a particle switching from ``coverage`` to ``cv`` would keep
+    going, except that switching into ``cv`` draws afresh, see above).
+
+    Args:
+        x, y, vx, vy: ``(...)`` positions (m) and velocity states (m/s) in the old Σ_i.
+        mode: ``(...)`` int8 modes; u_switch: ``(...)`` uniforms in [0, 1).
+        noise: four ``(...)`` standard normals ``(n_px, n_py, n_vx, n_vy)``.
+        qx, qy: q_m in the old Σ_i, broadcast against ``x``.
+        dt: step (s); p_switch: per-step switching probability; cdf: ``(4,)`` prior.
+        k_p, standoff_m: Eq. 20's gain (1/s) and standoff ρ (m); v_max: speed limit (m/s).
+        sig_pos_by_mode: ``(4,)`` per-step position noise std per axis of each mode (m).
+        sig_vel: per-step velocity random-walk std per axis of the ``cv`` mode (m/s).
+
+    Returns:
+        ``(x', y', vx', vy', mode')`` in the old Σ_i.
+    """
+    n_px, n_py, n_vx, n_vy = noise
+    mode, switched = switch_modes(mode, u_switch, p_switch, cdf)
+    # cv (computed for every particle, zeroed for the others): velocity random walk
+    is_cv = mode == MODE_CV
+    ux = n_vx * sig_vel
+    ux += vx
+    uy = n_vy * sig_vel
+    uy += vy
+    f = _speed_factor(ux, uy, v_max)
+    f *= is_cv
+    ux *= f
+    uy *= f
+    # the rarer modes and the fresh velocities on their particles only
+    fresh = switched & is_cv
+    if fresh.any():
+        ux[fresh], uy[fresh] = fresh_velocity(
+            n_vx[fresh], n_vy[fresh], v_max, np.broadcast_to(h, x.shape)[fresh], forward_bias
+        )
+    sel = mode == MODE_COVERAGE
+    if sel.any():
+        ux[sel], uy[sel] = coverage_input(
+            x[sel],
+            y[sel],
+            np.broadcast_to(qx, x.shape)[sel],
+            np.broadcast_to(qy, x.shape)[sel],
+            k_p,
+            v_max,
+            standoff_m,
+        )
+    sel = mode == MODE_CROSSING
+    if sel.any():
+        ux[sel], uy[sel] = crossing_input(x[sel], y[sel], v_max)
+    sig = sig_pos_by_mode[mode]
+    xo = sig * n_px
+    xo += x
+    xo += dt * ux
+    yo = sig * n_py
+    yo += y
+    yo += dt * uy
+    return xo, yo, ux, uy, mode
+
+
+def rotate_velocity(
+    vx: np.ndarray, vy: np.ndarray, dyaw: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Re-express velocities after Σ_i turned by ``dyaw``: ``R(dyaw)ᵀ v`` (no translation;
+    the velocity part of :func:`to_new_body_frame`)."""
+    c, s = np.cos(dyaw), np.sin(dyaw)
+    return c * vx + s * vy, c * vy - s * vx
 
 
 def own_motion(

@@ -58,15 +58,15 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
-from fov_marl.validation import check_bool, check_choice, check_int, check_real
+from fov_marl.validation import ConfigError, check_bool, check_choice, check_int, check_real
 
 __all__ = ["TrackerParams", "MotionModel", "InitMode", "EgoMotion", "MAX_NOISE"]
 
-MotionModel = Literal["auto", "coverage", "crossing", "static"]
+MotionModel = Literal["auto", "mixture", "coverage", "crossing", "static"]
 InitMode = Literal["auto", "known", "uniform"]
 EgoMotion = Literal["action", "pose"]
 
-_MOTION_MODELS = ("auto", "coverage", "crossing", "static")
+_MOTION_MODELS = ("auto", "mixture", "coverage", "crossing", "static")
 _INIT_MODES = ("auto", "known", "uniform")
 _EGO_MOTIONS = ("action", "pose")
 
@@ -87,6 +87,16 @@ _REAL_FIELDS: dict[str, tuple[float, float, bool, bool]] = {
     "recovery_min_ess": (0.0, 1e9, False, False),
     "recovery_gate_chi2": (0.0, 1e9, True, False),
     "min_meas_var": (0.0, MAX_NOISE, True, False),
+    # mode mixture (motion_model="mixture")
+    "mode_prior_static": (0.0, 1.0, False, False),
+    "mode_prior_coverage": (0.0, 1.0, False, False),
+    "mode_prior_crossing": (0.0, 1.0, False, False),
+    "mode_prior_cv": (0.0, 1.0, False, False),
+    "mode_switch_rate_hz": (0.0, MAX_NOISE, False, False),
+    "mixture_noise_m_per_sqrt_s": (0.0, MAX_NOISE, False, False),
+    "cv_noise_m_per_sqrt_s": (0.0, MAX_NOISE, False, False),
+    "cv_velocity_noise_mps_per_sqrt_s": (0.0, MAX_NOISE, False, False),
+    "cv_forward_bias": (0.0, MAX_NOISE, False, False),
 }
 
 
@@ -150,6 +160,15 @@ class TrackerParams:
     ego_motion: EgoMotion = "action"
     clamp_to_arena: bool = True
     min_meas_var: float = 1e-4
+    mode_prior_static: float = 0.32
+    mode_prior_coverage: float = 0.06
+    mode_prior_crossing: float = 0.08
+    mode_prior_cv: float = 0.54
+    mode_switch_rate_hz: float = 0.1
+    mixture_noise_m_per_sqrt_s: float = 1.25
+    cv_noise_m_per_sqrt_s: float = 0.18
+    cv_velocity_noise_mps_per_sqrt_s: float = 0.08
+    cv_forward_bias: float = 1.5
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -181,3 +200,24 @@ class TrackerParams:
         for name, (lo, hi, lo_open, hi_open) in _REAL_FIELDS.items():
             value = check_real(name, getattr(self, name), lo, hi, lo_open=lo_open, hi_open=hi_open)
             set_(self, name, value)
+        priors = self._mode_weights()
+        if sum(priors) <= 0.0:
+            raise ConfigError(
+                "mode_prior_static + mode_prior_coverage + mode_prior_crossing + mode_prior_cv "
+                f"must be > 0, got {sum(priors)!r}"
+            )
+
+    def _mode_weights(self) -> tuple[float, float, float, float]:
+        return (
+            self.mode_prior_static,
+            self.mode_prior_coverage,
+            self.mode_prior_crossing,
+            self.mode_prior_cv,
+        )
+
+    def mode_prior(self) -> tuple[float, float, float, float]:
+        """The mixture's mode prior ``(static, coverage, crossing, cv)``, normalised to sum 1
+        (the ``mode_prior_*`` fields are weights)."""
+        w = self._mode_weights()
+        total = sum(w)
+        return tuple(x / total for x in w)  # type: ignore[return-value]

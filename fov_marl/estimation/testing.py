@@ -59,6 +59,7 @@ __all__ = [
     "ChaseMotion",
     "WaitChargeMotion",
     "random_poses",
+    "clustered_poses",
     "calibration_rates",
     "calibration_counter",
     "CalibrationCounter",
@@ -73,6 +74,27 @@ def random_poses(config: ScenarioConfig, rng: np.random.Generator) -> np.ndarray
     sep = min(config.init_min_separation_m, 0.5 * (L - 2 * r) / max(math.sqrt(n), 1.0))
     while k < n:
         p = rng.uniform(r, L - r, 2)
+        if k == 0 or np.min(np.linalg.norm(out[:k, :2] - p, axis=1)) >= sep:
+            out[k, :2] = p
+            out[k, 2] = rng.uniform(-math.pi, math.pi)
+            k += 1
+    return out
+
+
+def clustered_poses(
+    config: ScenarioConfig, rng: np.random.Generator, size_m: float = 10.0
+) -> np.ndarray:
+    """``(N, 3)`` random poses in a ``size_m`` square around q_m (clamped to the arena),
+    at least ``min(init_min_separation_m, size_m / (2 sqrt N))`` apart, random yaw: a team
+    that starts within sight of each other."""
+    n, r, L = config.n_agents, config.robot_radius_m, config.arena_size_m
+    lo = np.clip(np.asarray(config.density_mean_m, dtype=np.float64) - 0.5 * size_m, r, L - r)
+    hi = np.minimum(lo + size_m, L - r)
+    sep = min(config.init_min_separation_m, 0.5 * size_m / max(math.sqrt(n), 1.0))
+    out = np.empty((n, 3))
+    k = 0
+    while k < n:
+        p = rng.uniform(lo, hi)
         if k == 0 or np.min(np.linalg.norm(out[:k, :2] - p, axis=1)) >= sep:
             out[k, :2] = p
             out[k, 2] = rng.uniform(-math.pi, math.pi)
@@ -355,15 +377,20 @@ class CalibrationCounter:
 
     Categories of a (robot, neighbour) pair at a step: ``detected`` this step; ``recent``:
     undetected for less than ``long_s``; ``long``: undetected for at least ``long_s``.
+    :meth:`stats` adds ``all`` (the three pooled) and ``near``: the pairs, of any
+    category, whose true distance is at most ``near_m`` (the neighbours a safety
+    constraint is about; not part of ``all``'s sum twice, it is a separate view).
     """
 
     KEYS = ("detected", "recent", "long")
 
-    def __init__(self, long_s: float = 5.0) -> None:
+    def __init__(self, long_s: float = 5.0, near_m: float = 10.0) -> None:
         self.long_s = long_s
-        self.hits = dict.fromkeys(self.KEYS, 0)
-        self.n = dict.fromkeys(self.KEYS, 0)
-        self.sum_a = dict.fromkeys(self.KEYS, 0.0)
+        self.near_m = near_m
+        keys = (*self.KEYS, "near")
+        self.hits = dict.fromkeys(keys, 0)
+        self.n = dict.fromkeys(keys, 0)
+        self.sum_a = dict.fromkeys(keys, 0.0)
 
     def add(self, est: Any, truth_body: np.ndarray) -> None:
         """Count one step: ``est`` a :class:`~fov_marl.estimation.BankEstimate` (or
@@ -381,35 +408,37 @@ class CalibrationCounter:
         inside = d == 0
         long_ = ~est.detected & (est.time_since_seen_s >= self.long_s - 1e-9)
         recent = ~est.detected & ~long_
-        for key, sel in (("detected", est.detected), ("recent", recent), ("long", long_)):
+        near = np.hypot(truth_body[..., 0], truth_body[..., 1]) <= self.near_m
+        cats = (("detected", est.detected), ("recent", recent), ("long", long_), ("near", near))
+        for key, sel in cats:
             self.hits[key] += int(np.sum(inside[sel]))
             self.n[key] += int(np.sum(sel))
             self.sum_a[key] += float(np.sum(est.ellipse_a[sel]))
 
     def merge(self, other: CalibrationCounter) -> CalibrationCounter:
         """Add ``other``'s counts into this one (pooling episodes); returns self."""
-        for k in self.KEYS:
+        for k in self.hits:
             self.hits[k] += other.hits[k]
             self.n[k] += other.n[k]
             self.sum_a[k] += other.sum_a[k]
         return self
 
     def stats(self) -> dict[str, dict[str, float]]:
-        """``{category: {"rate", "n", "mean_a_m"}}`` for the three categories and ``all``
-        (rate NaN where a category is empty)."""
+        """``{category: {"rate", "n", "mean_a_m"}}`` for the three categories, ``all`` and
+        ``near`` (rate NaN where a category is empty)."""
         out = {}
-        for k in self.KEYS:
+        for k in (*self.KEYS, "near"):
             n = self.n[k]
             out[k] = dict(
                 rate=self.hits[k] / n if n else float("nan"),
                 n=n,
                 mean_a_m=self.sum_a[k] / n if n else float("nan"),
             )
-        n = sum(self.n.values())
+        n = sum(self.n[k] for k in self.KEYS)
         out["all"] = dict(
-            rate=sum(self.hits.values()) / n if n else float("nan"),
+            rate=sum(self.hits[k] for k in self.KEYS) / n if n else float("nan"),
             n=n,
-            mean_a_m=sum(self.sum_a.values()) / n if n else float("nan"),
+            mean_a_m=sum(self.sum_a[k] for k in self.KEYS) / n if n else float("nan"),
         )
         return out
 
@@ -422,17 +451,24 @@ def calibration_counter(
     seed: int = 0,
     long_s: float = 5.0,
     known_start: bool = True,
+    start: Callable[[ScenarioConfig, np.random.Generator], np.ndarray] | None = None,
+    near_m: float = 10.0,
 ) -> CalibrationCounter:
     """One :class:`MiniWorld` episode with every robot driven by ``motion(config, rng)``
     and a :class:`~fov_marl.estimation.TrackerBank` of all robots, counted by a
-    :class:`CalibrationCounter` at every step (after the step's update)."""
+    :class:`CalibrationCounter` at every step (after the step's update).
+
+    ``start(config, rng)`` gives the initial poses (default :func:`random_poses`; e.g.
+    :func:`clustered_poses`), drawn from the world's Generator ``default_rng(seed)``.
+    """
     from fov_marl.estimation import TrackerBank
 
-    world = MiniWorld(config, np.random.default_rng(seed))
+    rng = np.random.default_rng(seed)
+    world = MiniWorld(config, rng, poses=None if start is None else start(config, rng))
     pol = motion(config, np.random.default_rng(seed + 7919))
     bank = TrackerBank(config, params, seed=seed)
     bank.reset(world.observe(), initial_poses_world=world.poses if known_start else None)
-    counter = CalibrationCounter(long_s)
+    counter = CalibrationCounter(long_s, near_m)
     n = config.n_agents
     for _ in range(steps):
         a = pol(world.poses)
@@ -465,4 +501,4 @@ def calibration_rates(
         at least ``long_s`` seconds.
     """
     st = calibration_counter(config, motion, params, steps, seed, long_s, known_start).stats()
-    return {k: (v["rate"], v["n"]) for k, v in st.items()}
+    return {k: (st[k]["rate"], st[k]["n"]) for k in (*CalibrationCounter.KEYS, "all")}

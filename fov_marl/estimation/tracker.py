@@ -82,10 +82,16 @@ class TrackerEstimate:
         detected: ``(M,)`` bool, detected in the last observation.
         time_since_seen_s: ``(M,)`` seconds since the last detection (since the reset
             when never detected).
-        velocity_est_body: ``(M, 2)`` the neighbour model u_j^est (Eq. 20 / Eq. 22)
-            evaluated at the mean, in Σ_i (m/s); zeros for the ``static`` model.
+        velocity_est_body: ``(M, 2)`` the neighbour model u_j^est evaluated at the mean,
+            in Σ_i (m/s): Eq. 20 / Eq. 22 for those models, zeros for ``static``; for the
+            ``mixture``, the mixture's mean velocity ``P_cov u_20(μ) + P_cross u_22(μ) +
+            Σ_{k ∈ cv} w_k v_k / Σ_k w_k`` (mode probabilities P from ``mode_probs``,
+            the constant-velocity particles' own velocities; static contributes 0).
         ess: ``(M,)`` effective sample size of the weighted set behind the estimate.
         recovered: ``(M,)`` bool, re-seeded on the last update.
+        mode_probs: ``(M, 4)`` weighted fraction of the particles in each motion mode
+            (order :data:`~fov_marl.estimation.kernels.MODE_NAMES`: static, coverage,
+            crossing, cv) behind the estimate; one-hot for the single models.
         confidence: the ellipse's confidence level.
         time_s: simulated seconds since the reset.
     """
@@ -103,6 +109,7 @@ class TrackerEstimate:
     velocity_est_body: np.ndarray
     ess: np.ndarray
     recovered: np.ndarray
+    mode_probs: np.ndarray
     confidence: float
     time_s: float
 
@@ -126,6 +133,7 @@ class BankEstimate:
     velocity_est_body: np.ndarray
     ess: np.ndarray
     recovered: np.ndarray
+    mode_probs: np.ndarray
     confidence: float
     time_s: float
 
@@ -190,7 +198,8 @@ class _BankCore:
         lays = [ObservationLayout(n, int(a)) for a in agent_indices]
         self._ids = np.stack([lay.neighbour_ids for lay in lays]).reshape(self._R, m)
         model = params.motion_model
-        self._model = config.scenario if model == "auto" else model
+        self._model = "mixture" if model == "auto" else model
+        self._mix = self._model == "mixture"
         self._chi2 = chi2_2dof(params.confidence)
         var = np.maximum(np.asarray(config.meas_cov_diag, dtype=np.float64), params.min_meas_var)
         self._meas_std = np.sqrt(var)
@@ -200,6 +209,7 @@ class _BankCore:
         self._fov = config.fov_rad
         self._range = config.detection_range_m
         self._dt = config.dt_s
+        self._vmax = float(config.v_max_mps)
         self._q_m = np.asarray(config.density_mean_m, dtype=np.float64)
         rho = params.coverage_standoff_m
         self._standoff = float(
@@ -207,7 +217,16 @@ class _BankCore:
         )
         self._sig_p = params.process_noise_m_per_sqrt_s * math.sqrt(self._dt)
         self._sig_h = params.heading_noise_rad_per_sqrt_s * math.sqrt(self._dt)
-        self._noise = np.empty((self._R, 3, self._P))
+        self._noise = np.empty((self._R, 5 if self._mix else 3, self._P))
+        if self._mix:
+            self._uni = np.empty((self._R, self._P))
+            self._cdf = K.mode_cdf(params.mode_prior())
+            self._p_switch = -math.expm1(-params.mode_switch_rate_hz * self._dt)
+            q_mix = params.mixture_noise_m_per_sqrt_s
+            self._sig_mode = math.sqrt(self._dt) * np.array(
+                [q_mix, q_mix, q_mix, params.cv_noise_m_per_sqrt_s]
+            )
+            self._sig_v = params.cv_velocity_noise_mps_per_sqrt_s * math.sqrt(self._dt)
         self._u = np.empty((self._R, m))
         self._block_ids = np.arange(self._R * m)
         self._origin = np.zeros(2)
@@ -261,6 +280,18 @@ class _BankCore:
                     self._x[k] = b[:, 0]
                     self._y[k] = b[:, 1]
                     self._h[k] = 2.0 * math.pi * uu[2] - math.pi
+            if self._mix:
+                self._vx = np.empty((R, P))
+                self._vy = np.empty((R, P))
+                for k, g in enumerate(self._rngs):
+                    nv = g.standard_normal((2, P))
+                    self._vx[k], self._vy[k] = K.fresh_velocity(
+                        nv[0], nv[1], self._vmax, self._h[k], self.params.cv_forward_bias
+                    )
+                local = np.arange(R * P) - self._starts[self._gid]
+                self._mode = K.stratified_modes(
+                    local, self._block_len[self._gid], self._cdf
+                ).reshape(R, P)
         self._tss = np.zeros((R, M))
         self._time_s = 0.0
         self.n_recoveries_detection[:] = 0
@@ -303,7 +334,12 @@ class _BankCore:
             dyaw = K.wrap(pose_now[:, 2] - self._pose_prev[:, 2])
         for k, g in enumerate(self._rngs):
             g.standard_normal(out=self._noise[k])
+            if self._mix:
+                g.random(out=self._uni[k])
         x, y, h = self._x, self._y, self._h
+        if self._mix:
+            self._predict_mixture(d_body, dyaw, pose_now)
+            return
         if self._model == "coverage":
             q = self._goal_prev
             ux, uy = K.coverage_input(
@@ -325,6 +361,42 @@ class _BankCore:
         if p.clamp_to_arena:
             x, y = self._clamp(x, y, pose_now[:, 0:1], pose_now[:, 1:2], pose_now[:, 2:3])
         self._x, self._y, self._h = x, y, h
+
+    def _predict_mixture(self, d_body, dyaw, pose_now) -> None:
+        """Eq. 2 with the mode mixture (:func:`~fov_marl.estimation.kernels.mixture_predict`)
+        in the old Σ_i, then the inverse own motion (positions, headings, velocities)."""
+        p = self.params
+        nz = self._noise
+        q = self._goal_prev
+        xo, yo, vx, vy, mode = K.mixture_predict(
+            self._x,
+            self._y,
+            self._h,
+            self._vx,
+            self._vy,
+            self._mode,
+            self._uni,
+            (nz[:, 0], nz[:, 1], nz[:, 3], nz[:, 4]),
+            q[:, 0:1],
+            q[:, 1:2],
+            dt=self._dt,
+            p_switch=self._p_switch,
+            cdf=self._cdf,
+            k_p=p.k_p,
+            v_max=self._vmax,
+            standoff_m=self._standoff,
+            sig_pos_by_mode=self._sig_mode,
+            sig_vel=self._sig_v,
+            forward_bias=p.cv_forward_bias,
+        )
+        ho = self._h + self._sig_h * nz[:, 2]
+        dy = dyaw[:, None]
+        x, y, h = K.to_new_body_frame(xo, yo, ho, d_body[:, 0:1], d_body[:, 1:2], dy)
+        if p.clamp_to_arena:
+            x, y = self._clamp(x, y, pose_now[:, 0:1], pose_now[:, 1:2], pose_now[:, 2:3])
+        self._x, self._y, self._h = x, y, h
+        self._vx, self._vy = K.rotate_velocity(vx, vy, dy)
+        self._mode = mode
 
     def _clamp(self, x, y, px, py, yaw):
         """Clamp body-frame positions to the arena ``[r, L − r]^2`` (via Σ_w, own pose)."""
@@ -376,6 +448,17 @@ class _BankCore:
                 self._recover(b, bool(det_f[b]), x, y, h, w, zx, zy, zh, pose)
             ess = np.where(rec, blen.astype(np.float64), ess)
         sw, mean, cov = K.weighted_moments(x, y, w, gid, starts)
+        if self._mix:
+            mode = self._mode.reshape(-1)
+            vx = self._vx.reshape(-1)
+            vy = self._vy.reshape(-1)
+            probs = np.bincount(gid * 4 + mode, weights=w, minlength=4 * R * M).reshape(-1, 4)
+            probs /= sw[:, None]
+            w_cv = w * (mode == K.MODE_CV)
+            v_cv = np.stack(
+                [np.add.reduceat(w_cv * vx, starts) / sw, np.add.reduceat(w_cv * vy, starts) / sw],
+                -1,
+            )
         if self.params.mc_error_factor > 0.0:
             cov *= (1.0 + self.params.mc_error_factor / ess)[:, None, None]
         a, b, psi = confidence_ellipse(cov, self._chi2)
@@ -393,6 +476,12 @@ class _BankCore:
         self._x = x[idx].reshape(R, P)
         self._y = y[idx].reshape(R, P)
         self._h = h[idx].reshape(R, P)
+        if self._mix:
+            self._mode = mode[idx].reshape(R, P)
+            self._vx = vx[idx].reshape(R, P)
+            self._vy = vy[idx].reshape(R, P)
+            self._mode_probs = probs.reshape(R, M, 4)
+            self._v_cv = v_cv.reshape(R, M, 2)
         self._counts = counts
         self._set_blocks()
         self._est = dict(
@@ -404,6 +493,7 @@ class _BankCore:
             ellipse_distance=d_r,
             ess=ess.reshape(R, M),
             recovered=rec.reshape(R, M),
+            mode_probs=self._mode_probs if self._mix else self._one_hot(),
         )
 
     def _store_empty(self) -> None:
@@ -417,7 +507,14 @@ class _BankCore:
             ellipse_distance=np.zeros((R, 0)),
             ess=np.zeros((R, 0)),
             recovered=np.zeros((R, 0), dtype=bool),
+            mode_probs=np.zeros((R, 0, 4)),
         )
+
+    def _one_hot(self) -> np.ndarray:
+        """``(R, M, 4)`` mode probabilities of a single-model tracker."""
+        out = np.zeros((self._R, self._M, 4))
+        out[..., K.MODE_NAMES.index(self._model)] = 1.0
+        return out
 
     def _recover(self, b, detected, x, y, h, w, zx, zy, zh, pose) -> None:
         """Re-seed block ``b`` in place (see module docstring, step 4); weights become 1."""
@@ -436,14 +533,30 @@ class _BankCore:
             x[s:e] = bx
             y[s:e] = by
             h[s:e] = K.wrap(zh[k, j] + sd[2] * nz[2])
+            self._recover_mixture(g, k, s, e)
             self.n_recoveries_detection[k] += 1
         else:
             bx, by = self._uniform_outside_fov(g, n, pose[k])
             x[s:e] = bx
             y[s:e] = by
             h[s:e] = 2.0 * math.pi * g.random(n) - math.pi
+            self._recover_mixture(g, k, s, e)
             self.n_recoveries_deleted[k] += 1
         w[s:e] = 1.0
+
+    def _recover_mixture(self, g: np.random.Generator, k: int, s: int, e: int) -> None:
+        """Mixture state of a re-seeded block (flat slice ``[s, e)`` of row ``k``'s chunk):
+        stratified prior modes, fresh velocities from ``standard_normal((2, n))``."""
+        if not self._mix:
+            return
+        n = e - s
+        nv = g.standard_normal((2, n))
+        vx, vy = K.fresh_velocity(
+            nv[0], nv[1], self._vmax, self._h.reshape(-1)[s:e], self.params.cv_forward_bias
+        )
+        self._vx.reshape(-1)[s:e] = vx
+        self._vy.reshape(-1)[s:e] = vy
+        self._mode.reshape(-1)[s:e] = K.stratified_modes(np.arange(n), np.full(n, n), self._cdf)
 
     def _uniform_outside_fov(self, g: np.random.Generator, n: int, pose: np.ndarray):
         """``n`` points uniform over the arena ``[r, L − r]^2`` outside F_i, in Σ_i.
@@ -478,6 +591,23 @@ class _BankCore:
         mean = self._est["mean_body"]
         if self._M == 0 or self._model == "static":
             return np.zeros(mean.shape)
+        if self._mix:
+            q = self._goal_prev
+            ax, ay = K.coverage_input(
+                mean[..., 0],
+                mean[..., 1],
+                q[:, 0:1],
+                q[:, 1:2],
+                self.params.k_p,
+                self._vmax,
+                self._standoff,
+            )
+            bx, by = K.crossing_input(mean[..., 0], mean[..., 1], self._vmax)
+            pr = self._est["mode_probs"]
+            v = self._v_cv.copy()
+            v[..., 0] += pr[..., K.MODE_COVERAGE] * ax + pr[..., K.MODE_CROSSING] * bx
+            v[..., 1] += pr[..., K.MODE_COVERAGE] * ay + pr[..., K.MODE_CROSSING] * by
+            return v
         if self._model == "coverage":
             q = self._goal_prev
             vx, vy = K.coverage_input(
@@ -512,6 +642,16 @@ class _BankCore:
 
     def particle_headings(self, k: int) -> np.ndarray:
         return self._h[k].copy()
+
+    def particle_modes(self, k: int) -> np.ndarray:
+        if self._mix:
+            return self._mode[k].copy()
+        return np.full(self._P, K.MODE_NAMES.index(self._model), dtype=np.int8)
+
+    def particle_velocities(self, k: int) -> np.ndarray:
+        if self._mix:
+            return np.stack([self._vx[k], self._vy[k]], -1)
+        return np.zeros((self._P, 2))
 
 
 #: Robots per computation chunk are chosen so a chunk holds about this many particles:
@@ -804,6 +944,19 @@ class TrackerBank:
         core, j = self._locate(k)
         return core.particle_headings(j)
 
+    def particle_modes(self, k: int = 0) -> np.ndarray:
+        """``(P_T,)`` int8 motion modes (:data:`~fov_marl.estimation.kernels.MODE_NAMES`
+        indices) of the ``k``-th robot's particles; constant for the single models."""
+        core, j = self._locate(k)
+        return core.particle_modes(j)
+
+    def particle_velocities_body(self, k: int = 0) -> np.ndarray:
+        """``(P_T, 2)`` velocity states in Σ_i (m/s) of the ``k``-th robot's particles: the
+        velocity each moved with on the last prediction (mixture); zeros for the single
+        models, which keep no velocity state."""
+        core, j = self._locate(k)
+        return core.particle_velocities(j)
+
 
 def _params(overrides: Mapping[str, Any], base: TrackerParams | None = None) -> TrackerParams:
     valid = {f.name for f in fields(TrackerParams)}
@@ -931,3 +1084,12 @@ class NeighborTracker:
     def particle_headings(self) -> np.ndarray:
         """``(P_T,)`` relative headings of the particles (rad)."""
         return self._bank.particle_headings(0)
+
+    def particle_modes(self) -> np.ndarray:
+        """``(P_T,)`` int8 motion modes; see :meth:`TrackerBank.particle_modes`."""
+        return self._bank.particle_modes(0)
+
+    def particle_velocities_body(self) -> np.ndarray:
+        """``(P_T, 2)`` velocity states (m/s); see
+        :meth:`TrackerBank.particle_velocities_body`."""
+        return self._bank.particle_velocities_body(0)

@@ -44,6 +44,64 @@ def neighbour_input(
     return out
 
 
+MODES = ("static", "coverage", "crossing", "cv")
+
+
+def shrink(v: np.ndarray, v_max: float) -> np.ndarray:
+    """``v`` scaled down to norm ``v_max`` when longer."""
+    n = math.hypot(v[0], v[1])
+    return v * (v_max / n) if n > v_max else v
+
+
+def mixture_predict_reference(
+    x, y, h, vx, vy, mode, u, noise, q, *, dt, p_switch, prior, k_p, v_max, standoff,
+    sig_pos, sig_vel, forward_bias,
+):  # fmt: skip
+    """The mixture prediction (kernels.mixture_predict), one particle at a time, written
+    from the definitions: switch with probability p to a mode drawn from the prior by
+    inverse CDF of ``u / p``; the mode's velocity (static 0, Eq. 20, Eq. 22, cv random
+    walk or a fresh forward-biased velocity after a switch); move with the mode's noise.
+
+    ``noise``: ``(4, n)`` standard normals (position x, y, velocity x, y); ``q``: q_m (2,).
+    Returns ``(x, y, vx, vy, mode)`` as new arrays.
+    """
+    prior = np.asarray(prior, dtype=np.float64) / np.sum(prior)
+    n = len(x)
+    out = np.zeros((5, n))
+    for k in range(n):
+        m = int(mode[k])
+        switched = u[k] < p_switch
+        if switched:
+            t = u[k] / p_switch
+            acc = 0.0
+            m = len(prior) - 1
+            for j, pj in enumerate(prior):
+                acc += pj
+                if t < acc:
+                    m = j
+                    break
+        p = np.array([x[k], y[k]])
+        if MODES[m] == "static":
+            v = np.zeros(2)
+        elif MODES[m] == "coverage":
+            e = p - q
+            r = math.hypot(e[0], e[1])
+            speed = min(max(k_p * (r - standoff), 0.0), v_max)
+            v = -speed * e / r if r > 0 else np.zeros(2)
+        elif MODES[m] == "crossing":
+            r = math.hypot(p[0], p[1])
+            v = -0.5 * v_max * p / r if r > 0 else np.zeros(2)
+        elif switched:  # fresh velocity in the particle's heading frame, rotated into Σ_i
+            f = shrink(v_max * np.array([forward_bias + noise[2, k], noise[3, k]]), v_max)
+            c, s = math.cos(h[k]), math.sin(h[k])
+            v = shrink(np.array([c * f[0] - s * f[1], s * f[0] + c * f[1]]), v_max)
+        else:
+            v = shrink(np.array([vx[k], vy[k]]) + sig_vel * noise[2:4, k], v_max)
+        p = p + dt * v + sig_pos[m] * noise[0:2, k]
+        out[:, k] = [p[0], p[1], v[0], v[1], m]
+    return out[0], out[1], out[2], out[3], out[4].astype(np.int8)
+
+
 def allocate_reference(d: np.ndarray, n_total: int, floor_: int, scale: float) -> np.ndarray:
     """Largest-remainder split with a loop (see kernels.allocate_budget)."""
     m = len(d)
@@ -98,9 +156,11 @@ def reference_step(
     obs: np.ndarray,
     rng: np.random.Generator,
 ) -> tuple[dict, dict]:
-    """One step from ``state`` (x, y, h (P,), counts (M,), pose_prev (3,), goal_prev (2,)).
+    """One step from ``state`` (x, y, h (P,), counts (M,), pose_prev (3,), goal_prev (2,);
+    for the mixture also vx, vy (P,) and mode (P,)).
 
-    Returns ``(new_state, estimate)`` with estimate keys mean, cov, a, b, psi, dist, counts.
+    Returns ``(new_state, estimate)`` with estimate keys mean, cov, a, b, psi, dist, counts,
+    recovered, and for the mixture mode_probs (M, 4) and velocity (M, 2).
     """
     n_agents = cfg.n_agents
     m = n_agents - 1
@@ -108,7 +168,27 @@ def reference_step(
     lay = ObservationLayout(n_agents, agent_index)
     slots = lay.slots(np.asarray(obs, dtype=np.float64)).astype(np.float64)
     pose_now = lay.own_pose_world(obs)
-    model = cfg.scenario if params.motion_model == "auto" else params.motion_model
+    model = "mixture" if params.motion_model == "auto" else params.motion_model
+    mix = model == "mixture"
+    prior = list(params.mode_prior())
+    cdf = np.cumsum(np.asarray(prior) / np.sum(prior))
+    q_mix = params.mixture_noise_m_per_sqrt_s  # static, Eq. 20 and Eq. 22 modes
+    sig_mode = math.sqrt(cfg.dt_s) * np.array([q_mix, q_mix, q_mix, params.cv_noise_m_per_sqrt_s])
+
+    def prior_modes(n):  # stratified: particle k of n takes the prior's (k + 1/2)/n quantile
+        return np.array([int(np.sum(cdf[:-1] <= (k + 0.5) / n)) for k in range(n)], np.int8)
+
+    def fresh(nz, h):  # fresh velocities along the headings (kernels.fresh_velocity)
+        out = np.zeros((len(h), 2))
+        for k in range(len(h)):
+            f = shrink(
+                cfg.v_max_mps * np.array([params.cv_forward_bias + nz[0, k], nz[1, k]]),
+                cfg.v_max_mps,
+            )
+            c, s_ = math.cos(h[k]), math.sin(h[k])
+            out[k] = [c * f[0] - s_ * f[1], s_ * f[0] + c * f[1]]
+        return out
+
     rho = params.coverage_standoff_m
     rho = cfg.sensing_radius_m + cfg.safety_distance_m if rho is None else rho
     dt = cfg.dt_s
@@ -121,18 +201,35 @@ def reference_step(
     pose_new = integrate_unicycle(state["pose_prev"], v, om, dt)
     pose_new[:2] = np.clip(pose_new[:2], r_rob, L - r_rob)
 
-    noise = rng.standard_normal((3, p_total))
+    noise = rng.standard_normal((5 if mix else 3, p_total))
+    u_switch = rng.random(p_total) if mix else None
     sig_p = params.process_noise_m_per_sqrt_s * math.sqrt(dt)
     sig_h = params.heading_noise_rad_per_sqrt_s * math.sqrt(dt)
     counts = state["counts"]
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
 
-    sets, weights, recovered, esss = [], [], [], []
+    sets, weights, recovered, esss, mixes = [], [], [], [], []
     for j in range(m):
         sl = slice(starts[j], starts[j] + counts[j])
         p = np.stack([state["x"][sl], state["y"][sl]], -1)
-        u = neighbour_input(p, state["goal_prev"], model, params.k_p, cfg.v_max_mps, rho)
-        p = p + u * dt + sig_p * noise[:2, sl].T
+        if mix:
+            px, py, vx, vy, mode = mixture_predict_reference(
+                state["x"][sl], state["y"][sl], state["h"][sl], state["vx"][sl],
+                state["vy"][sl], state["mode"][sl], u_switch[sl], noise[[0, 1, 3, 4], sl],
+                state["goal_prev"], dt=dt, p_switch=-math.expm1(-params.mode_switch_rate_hz * dt),
+                prior=prior, k_p=params.k_p, v_max=cfg.v_max_mps, standoff=rho,
+                sig_pos=sig_mode, sig_vel=params.cv_velocity_noise_mps_per_sqrt_s * math.sqrt(dt),
+                forward_bias=params.cv_forward_bias,
+            )  # fmt: skip
+            p = np.stack([px, py], -1)
+            # velocities: world <- old body, then new body (rotation only)
+            vel = np.stack([vx, vy], -1)
+            ang = pose_new[2] - state["pose_prev"][2]
+            c, s_ = math.cos(ang), math.sin(ang)
+            vel = np.stack([c * vel[:, 0] + s_ * vel[:, 1], c * vel[:, 1] - s_ * vel[:, 0]], -1)
+        else:
+            u = neighbour_input(p, state["goal_prev"], model, params.k_p, cfg.v_max_mps, rho)
+            p = p + u * dt + sig_p * noise[:2, sl].T
         p = world_to_body(body_to_world(p, state["pose_prev"]), pose_new)
         h = wrap_angle(state["h"][sl] + sig_h * noise[2, sl] - om * dt)
         if params.clamp_to_arena:
@@ -160,6 +257,9 @@ def reference_step(
                 h = wrap_angle(zh + sd[2] * nz[2])
                 w = np.ones(counts[j])
                 ess = float(counts[j])
+                if mix:
+                    vel = fresh(rng.standard_normal((2, counts[j])), h)
+                    mode = prior_modes(counts[j])
         else:
             gone = in_fov(p, cfg.fov_rad, cfg.detection_range_m)
             w = np.where(gone, 0.0, 1.0)
@@ -168,8 +268,13 @@ def reference_step(
                 p = uniform_outside_fov(rng, counts[j], pose_now, cfg)
                 h = 2 * math.pi * rng.random(counts[j]) - math.pi
                 w = np.ones(counts[j])
+                if mix:
+                    vel = fresh(rng.standard_normal((2, counts[j])), h)
+                    mode = prior_modes(counts[j])
             ess = float(np.sum(w))  # 0/1 weights: the surviving particles
         sets.append((p, h))
+        if mix:
+            mixes.append((vel, mode))
         weights.append(w)
         esss.append(ess)
         recovered.append(bad)
@@ -189,12 +294,15 @@ def reference_step(
         dist, p_total, params.min_particles_per_neighbour, params.allocation_scale_m
     )
     u_off = rng.random(m)
-    xs, ys, hs = [], [], []
+    xs, ys, hs, vs, ms = [], [], [], [], []
     for j in range(m):
         idx = systematic_reference(weights[j], int(new_counts[j]), float(u_off[j]))
         xs.append(sets[j][0][idx, 0])
         ys.append(sets[j][0][idx, 1])
         hs.append(sets[j][1][idx])
+        if mix:
+            vs.append(mixes[j][0][idx])
+            ms.append(mixes[j][1][idx])
     new_state = dict(
         x=np.concatenate(xs),
         y=np.concatenate(ys),
@@ -203,6 +311,9 @@ def reference_step(
         pose_prev=pose_now,
         goal_prev=lay.goal_body(obs),
     )
+    if mix:
+        vv = np.concatenate(vs)
+        new_state.update(vx=vv[:, 0], vy=vv[:, 1], mode=np.concatenate(ms))
     est = dict(
         mean=mean,
         cov=cov,
@@ -213,4 +324,21 @@ def reference_step(
         counts=new_counts,
         recovered=np.array(recovered),
     )
+    if mix:  # Eq. 20's q_m in Σ_i: the cue in coverage, from the own pose in crossing
+        goal = lay.goal_body(obs)
+        if cfg.scenario != "coverage":
+            goal = world_to_body(np.asarray(cfg.density_mean_m, dtype=np.float64), pose_now)
+        probs = np.zeros((m, 4))
+        vel_est = np.zeros((m, 2))
+        for j in range(m):
+            w = weights[j] / np.sum(weights[j])
+            vel, mode = mixes[j]
+            for k in range(4):
+                probs[j, k] = np.sum(w[mode == k])
+            cv = mode == 3
+            vel_est[j] = np.sum(w[cv, None] * vel[cv], axis=0)
+            u20 = neighbour_input(mean[j : j + 1], goal, "coverage", params.k_p, cfg.v_max_mps, rho)
+            u22 = neighbour_input(mean[j : j + 1], goal, "crossing", params.k_p, cfg.v_max_mps, rho)
+            vel_est[j] += probs[j, 1] * u20[0] + probs[j, 2] * u22[0]
+        est.update(mode_probs=probs, velocity=vel_est)
     return new_state, est

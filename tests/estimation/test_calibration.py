@@ -14,10 +14,14 @@ Motions and what is asserted:
   category within ±0.03 of 0.95 (an overconfident filter fails the lower bound).
 * **Smooth random motion, diffusion model** (``motion_model="static"``, q = σ sqrt(2τ)):
   not overconfident (≥ 0.92); conservative for short gaps (the truth is ballistic there).
-* **Coverage-like motion, default parameters** (robots park on a ring around q_m, where
-  Eq. 20 as printed is wrong): not overconfident (≥ 0.92).
+* **Coverage-like motion, the coverage model with its default standoff**
+  (``motion_model="coverage"``; robots park on a ring around q_m, where Eq. 20 as printed
+  is wrong): not overconfident (≥ 0.92).
 * **The same with Eq. 20 as printed** (``coverage_standoff_m=0``): long-unseen neighbours
   are far outside their ellipses (the reason for the default standoff); asserted < 0.8.
+
+The default model (the mode mixture) is calibrated per neighbour behaviour in
+``test_mixture_calibration.py``.
 """
 
 from __future__ import annotations
@@ -51,11 +55,13 @@ DIFFUSION = dict(
     config={},
 )
 RING_DEFAULT = dict(
-    motion=functools.partial(RingMotion, radius_m=7.0), params=TrackerParams(), config={}
+    motion=functools.partial(RingMotion, radius_m=7.0),
+    params=TrackerParams(motion_model="coverage"),
+    config={},
 )
 RING_PAPER = dict(
     motion=functools.partial(RingMotion, radius_m=7.0),
-    params=TrackerParams(coverage_standoff_m=0.0),
+    params=TrackerParams(motion_model="coverage", coverage_standoff_m=0.0),
     config={},
 )
 
@@ -102,14 +108,14 @@ def test_not_overconfident_for_smooth_random_motion_with_the_diffusion_model():
     _check_floor(r)
 
 
-def test_default_parameters_not_overconfident_on_coverage_like_motion():
-    r = _rates(RING_DEFAULT, 6, 600, 0, "ring (coverage-like), defaults")
+def test_coverage_model_not_overconfident_on_coverage_like_motion():
+    r = _rates(RING_DEFAULT, 6, 600, 0, "ring (coverage-like), coverage model")
     _check_floor(r)
 
 
 def test_paper_eq20_without_standoff_is_overconfident_for_parked_robots():
     r_paper = _rates(RING_PAPER, 6, 600, 0, "ring (coverage-like), Eq. 20 as printed")
-    r_default = _rates(RING_DEFAULT, 6, 600, 0, "ring (coverage-like), defaults")
+    r_default = _rates(RING_DEFAULT, 6, 600, 0, "ring (coverage-like), coverage model")
     assert r_paper["long"][0] < 0.8
     assert r_default["long"][0] > r_paper["long"][0] + 0.3
 
@@ -120,11 +126,11 @@ def test_paper_eq20_without_standoff_is_overconfident_for_parked_robots():
 def test_calibration_long_runs(n_agents, seed):
     _check_two_sided(_rates(MATCHED, n_agents, 1500, seed, "eq20+noise, matched"))
     _check_floor(_rates(DIFFUSION, n_agents, 1500, seed, "random motion, static model"))
-    _check_floor(_rates(RING_DEFAULT, n_agents, 1500, seed, "ring (coverage-like), defaults"))
+    _check_floor(_rates(RING_DEFAULT, n_agents, 1500, seed, "ring (coverage-like), coverage"))
 
 
 def test_calibration_against_the_real_env_when_available():
-    """Same check on ``fov_coverage_v0`` once it exists (skipped until then)."""
+    """Same check on ``fov_coverage_v0`` (coverage model, default standoff)."""
     envs = pytest.importorskip("fov_marl.envs.fov_coverage_v0")
     import numpy as np
 
@@ -134,7 +140,7 @@ def test_calibration_against_the_real_env_when_available():
     env = envs.parallel_env(n_agents=6)
     obs, _ = env.reset(seed=0)
     agents = list(env.possible_agents)
-    bank = TrackerBank.for_env(env, seed=0)
+    bank = TrackerBank.for_env(env, seed=0, motion_model="coverage")
     bank.reset(obs, initial_poses_world=env.poses)
     pol = RingMotion(env.config, np.random.default_rng(0), radius_m=7.0)
     hits = {"detected": [0, 0], "long": [0, 0]}
@@ -158,7 +164,7 @@ def test_calibration_against_the_real_env_when_available():
             for k, sel in (("detected", e.detected[i]), ("long", long_)):
                 hits[k][0] += int(ins[sel].sum())
                 hits[k][1] += int(sel.sum())
-    print(f"\n[calibration] fov_coverage_v0 coverage-like motion, defaults: {hits}")
+    print(f"\n[calibration] fov_coverage_v0 coverage-like motion, coverage model: {hits}")
     for _k, (h, n) in hits.items():
         if n > 200:
             assert h / n >= FLOOR - 0.02

@@ -30,7 +30,7 @@ from .reference import reference_step
 
 def _state(tr: NeighborTracker) -> dict:
     b = tr._bank._cores[0]
-    return dict(
+    out = dict(
         x=b._x[0].copy(),
         y=b._y[0].copy(),
         h=b._h[0].copy(),
@@ -38,6 +38,9 @@ def _state(tr: NeighborTracker) -> dict:
         pose_prev=b._pose_prev[0].copy(),
         goal_prev=b._goal_prev[0].copy(),
     )
+    if b._mix:
+        out.update(vx=b._vx[0].copy(), vy=b._vy[0].copy(), mode=b._mode[0].copy())
+    return out
 
 
 def _all_finite(est: TrackerEstimate) -> bool:
@@ -366,12 +369,27 @@ def test_bank_for_env_uses_spawned_streams():
 @pytest.mark.parametrize(
     "scenario,params",
     [
-        ("coverage", TrackerParams(n_particles_total=300)),
-        ("coverage", TrackerParams(n_particles_total=300, coverage_standoff_m=0.0)),
-        ("crossing", TrackerParams(n_particles_total=300)),
+        ("coverage", TrackerParams(n_particles_total=300, motion_model="coverage")),
+        (
+            "coverage",
+            TrackerParams(n_particles_total=300, motion_model="coverage", coverage_standoff_m=0.0),
+        ),
+        ("crossing", TrackerParams(n_particles_total=300, motion_model="crossing")),
         (
             "coverage",
             TrackerParams(n_particles_total=300, motion_model="static", clamp_to_arena=False),
+        ),
+        ("coverage", TrackerParams(n_particles_total=300)),  # the default: mixture
+        ("crossing", TrackerParams(n_particles_total=300)),
+        (
+            "coverage",
+            TrackerParams(
+                n_particles_total=300,
+                motion_model="mixture",
+                mode_switch_rate_hz=2.0,  # many switches, fresh velocities
+                mode_prior_crossing=0.3,
+                clamp_to_arena=False,
+            ),
         ),
     ],
 )
@@ -407,6 +425,12 @@ def test_vectorised_step_equals_slow_reference(scenario, params):
         np.testing.assert_allclose(s["x"], new_state["x"], atol=1e-9)
         np.testing.assert_allclose(s["y"], new_state["y"], atol=1e-9)
         np.testing.assert_allclose(wrap_angle(s["h"] - new_state["h"]), 0.0, atol=1e-9)
+        if "mode" in new_state:
+            np.testing.assert_array_equal(s["mode"], new_state["mode"])
+            np.testing.assert_allclose(s["vx"], new_state["vx"], atol=1e-9)
+            np.testing.assert_allclose(s["vy"], new_state["vy"], atol=1e-9)
+            np.testing.assert_allclose(est.mode_probs, ref["mode_probs"], atol=1e-12)
+            np.testing.assert_allclose(est.velocity_est_body, ref["velocity"], atol=1e-9)
         kinds.update(("det" if d else "undet") for d in est.detected)
     assert kinds == {"det", "undet"}
 
