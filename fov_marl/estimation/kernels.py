@@ -280,17 +280,24 @@ def mixture_predict(
     * ``static``: 0 (a random walk: position noise only);
     * ``coverage``: Eq. 20 with standoff and saturation (:func:`coverage_input`);
     * ``crossing``: Eq. 22, ``v_max / 2`` towards robot i (:func:`crossing_input`);
-    * ``cv``: the particle's velocity state plus a random walk,
-      ``v + σ_v n_v`` shrunk to norm v_max; a particle that has just switched (into
-      ``cv``) takes a fresh velocity ``v_max n_v`` shrunk to v_max instead
-      (:func:`fresh_velocity`): a robot changing behaviour may start in any direction;
+    * ``cv``: the particle's velocity state plus a random walk, ``v + σ_v n_v`` shrunk
+      to norm v_max; a particle that has just switched (into ``cv``, possibly from
+      ``cv``) takes a fresh velocity instead, mostly along its heading ``h``
+      (:func:`fresh_velocity` with ``forward_bias``): a robot that changes behaviour
+      may start in any direction, most likely ahead;
 
     (3) it moves ``p + dt v + σ_pos[mode] n_p``; (4) its velocity state becomes the
-    velocity it moved with (so a particle switching from ``coverage`` to ``cv`` would keep
-    going, except that switching into ``cv`` draws afresh, see above).
+    velocity it moved with (only ``cv`` particles read it back: a switch into ``cv``
+    draws afresh).
+
+    Only particles in the coverage / crossing modes evaluate Eq. 20 / 22, and only the
+    (rare) fresh ones draw a fresh velocity; everything else is computed for all
+    particles at once. Tested against a one-particle-at-a-time reference
+    (``tests/estimation/reference.py``).
 
     Args:
         x, y, vx, vy: ``(...)`` positions (m) and velocity states (m/s) in the old Σ_i.
+        h: ``(...)`` relative headings (rad), for the direction of fresh velocities.
         mode: ``(...)`` int8 modes; u_switch: ``(...)`` uniforms in [0, 1).
         noise: four ``(...)`` standard normals ``(n_px, n_py, n_vx, n_vy)``.
         qx, qy: q_m in the old Σ_i, broadcast against ``x``.
@@ -298,6 +305,7 @@ def mixture_predict(
         k_p, standoff_m: Eq. 20's gain (1/s) and standoff ρ (m); v_max: speed limit (m/s).
         sig_pos_by_mode: ``(4,)`` per-step position noise std per axis of each mode (m).
         sig_vel: per-step velocity random-walk std per axis of the ``cv`` mode (m/s).
+        forward_bias: ``b`` of :func:`fresh_velocity`.
 
     Returns:
         ``(x', y', vx', vy', mode')`` in the old Σ_i.

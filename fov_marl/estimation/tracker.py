@@ -9,14 +9,19 @@ One step of robot i (:meth:`TrackerBank.step`), all neighbours at once, no loop 
 particles or neighbours (the only Python loops are over robots, for their own
 Generators, and over the rare re-seeded neighbours):
 
-1. prediction (Eq. 2): each particle moves by the neighbour model u_j^est (Eq. 20 in
-   coverage, saturated at v_max and with a standoff from q_m, see
-   :func:`~fov_marl.estimation.kernels.coverage_input`; Eq. 22 in crossing) plus
-   process noise, in the old Σ_i; then it is
-   re-expressed in the new Σ_i by the inverse of robot i's own motion (exact unicycle
-   integration of the applied action, with the env's arena clamp); positions are
-   clamped to the arena (known to every robot) and the relative heading takes a
-   random walk;
+1. prediction (Eq. 2): each particle moves by the neighbour model u_j^est plus process
+   noise, in the old Σ_i. The default model (``motion_model="auto"`` = ``"mixture"``)
+   is a mode mixture (:func:`~fov_marl.estimation.kernels.mixture_predict`): every
+   particle carries a mode (static random walk; Eq. 20 towards q_m, saturated at v_max
+   and with a standoff, :func:`~fov_marl.estimation.kernels.coverage_input`; Eq. 22,
+   v_max/2 towards robot i; constant velocity with a per-particle velocity state) that
+   switches with a small Markov probability per step, so the detections update the
+   mode probabilities through the weights and the resampling. The paper's single
+   models are ``"coverage"`` (Eq. 20), ``"crossing"`` (Eq. 22) and ``"static"``. Then
+   the particle is re-expressed in the new Σ_i by the inverse of robot i's own motion
+   (exact unicycle integration of the applied action, with the env's arena clamp;
+   velocity states are rotated); positions are clamped to the arena (known to every
+   robot) and the relative heading takes a random walk;
 2. weight (Eq. 3): Gaussian likelihood of the detection, in log space;
 3. deletion (Eq. 4): particles inside F_i of an undetected neighbour get weight 0;
 4. recovery (a documented addition): a neighbour whose particles were all deleted is
@@ -42,7 +47,14 @@ The estimate describes the weighted set of step 5; the particles returned by
 :meth:`TrackerBank.particles_body` are the resampled set of step 6 (same distribution).
 
 Random draws per robot and step, in this order: ``standard_normal((3, P_T))`` process
-noise; recovery draws, by ascending neighbour ID; ``random(M)`` resampling offsets.
+noise (x, y, heading); recovery draws, by ascending neighbour ID; ``random(M)``
+resampling offsets. The mixture changes the order thus (the single models are
+unchanged, bit for bit): the process noise is ``standard_normal((5, P_T))`` (x, y,
+heading, then the velocity noise x, y; the first three rows are the draws of the
+single models), followed by ``random(P_T)`` for the mode switches; each recovery draws
+its usual numbers and then ``standard_normal((2, P_j))`` for fresh velocities (modes of
+re-seeded particles are assigned by stratified prior quantiles, no draw); the reset
+draws ``standard_normal((2, P_T))`` fresh velocities after the initial cloud.
 """
 
 from __future__ import annotations
@@ -92,6 +104,11 @@ class TrackerEstimate:
         mode_probs: ``(M, 4)`` weighted fraction of the particles in each motion mode
             (order :data:`~fov_marl.estimation.kernels.MODE_NAMES`: static, coverage,
             crossing, cv) behind the estimate; one-hot for the single models.
+        velocity_cv_body: ``(M, 2)`` weighted mean velocity state of the particles in the
+            constant-velocity mode, in Σ_i (m/s): how the neighbour moves *if* it keeps
+            the velocity the detections showed (e.g. a charger at full speed, where
+            ``velocity_est_body`` is that times ``mode_probs[:, 3]`` plus the other
+            modes); zeros without cv particles and for the single models.
         confidence: the ellipse's confidence level.
         time_s: simulated seconds since the reset.
     """
@@ -110,6 +127,7 @@ class TrackerEstimate:
     ess: np.ndarray
     recovered: np.ndarray
     mode_probs: np.ndarray
+    velocity_cv_body: np.ndarray
     confidence: float
     time_s: float
 
@@ -134,6 +152,7 @@ class BankEstimate:
     ess: np.ndarray
     recovered: np.ndarray
     mode_probs: np.ndarray
+    velocity_cv_body: np.ndarray
     confidence: float
     time_s: float
 
@@ -494,6 +513,7 @@ class _BankCore:
             ess=ess.reshape(R, M),
             recovered=rec.reshape(R, M),
             mode_probs=self._mode_probs if self._mix else self._one_hot(),
+            velocity_cv_body=self._velocity_cv() if self._mix else np.zeros((R, M, 2)),
         )
 
     def _store_empty(self) -> None:
@@ -508,7 +528,13 @@ class _BankCore:
             ess=np.zeros((R, 0)),
             recovered=np.zeros((R, 0), dtype=bool),
             mode_probs=np.zeros((R, 0, 4)),
+            velocity_cv_body=np.zeros((R, 0, 2)),
         )
+
+    def _velocity_cv(self) -> np.ndarray:
+        """``(R, M, 2)`` mean velocity of the cv particles (0 where there are none)."""
+        p_cv = self._mode_probs[..., K.MODE_CV : K.MODE_CV + 1]
+        return np.divide(self._v_cv, p_cv, out=np.zeros_like(self._v_cv), where=p_cv > 0)
 
     def _one_hot(self) -> np.ndarray:
         """``(R, M, 4)`` mode probabilities of a single-model tracker."""

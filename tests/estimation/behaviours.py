@@ -89,10 +89,15 @@ def behaviour_counter(
 
 
 def pooled(
-    name: str, params: TrackerParams | None, steps: int, seeds, start: str = "cluster"
+    name: str,
+    params: TrackerParams | None,
+    steps: int,
+    seeds,
+    start: str = "cluster",
+    n_agents: int = 6,
 ) -> dict[str, dict[str, float]]:
     """:meth:`CalibrationCounter.stats` of ``name`` pooled over ``seeds``."""
     total = T.CalibrationCounter()
     for s in seeds:
-        total.merge(behaviour_counter(name, params, steps, s, start))
+        total.merge(behaviour_counter(name, params, steps, s, start, n_agents))
     return total.stats()

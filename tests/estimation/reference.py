@@ -340,5 +340,12 @@ def reference_step(
             u20 = neighbour_input(mean[j : j + 1], goal, "coverage", params.k_p, cfg.v_max_mps, rho)
             u22 = neighbour_input(mean[j : j + 1], goal, "crossing", params.k_p, cfg.v_max_mps, rho)
             vel_est[j] += probs[j, 1] * u20[0] + probs[j, 2] * u22[0]
-        est.update(mode_probs=probs, velocity=vel_est)
+        v_cv = np.zeros((m, 2))
+        for j in range(m):
+            w = weights[j] / np.sum(weights[j])
+            vel, mode = mixes[j]
+            cv = mode == 3
+            if np.any(w[cv] > 0):
+                v_cv[j] = np.sum(w[cv, None] * vel[cv], axis=0) / np.sum(w[cv])
+        est.update(mode_probs=probs, velocity=vel_est, velocity_cv=v_cv)
     return new_state, est

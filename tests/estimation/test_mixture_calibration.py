@@ -48,8 +48,9 @@ def test_default_model_is_calibrated(name):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("n_agents", [6, 12])
 @pytest.mark.parametrize("name", BEHAVIOURS)
-def test_default_model_is_calibrated_long(name):
-    st = pooled(name, TrackerParams(), steps=600, seeds=range(10, 16))
-    _show(name, st, "6 x 600")
+def test_default_model_is_calibrated_long(name, n_agents):
+    st = pooled(name, TrackerParams(), steps=600, seeds=range(10, 16), n_agents=n_agents)
+    _show(name, st, f"N={n_agents} 6 x 600")
     _check(name, st)

@@ -314,10 +314,11 @@ def test_tracker_reallocation_step_keeps_each_neighbours_estimate():
 
 # ---------------------------------------------------------------- batching and reference
 @pytest.mark.parametrize("n_agents", [2, 5, 12])
-def test_bank_equals_independent_trackers_bit_for_bit(n_agents):
+@pytest.mark.parametrize("model", ["mixture", "coverage"])
+def test_bank_equals_independent_trackers_bit_for_bit(n_agents, model):
     ep = record_episode(n_agents=n_agents, steps=40, seed=n_agents)
     cfg = ep.config
-    params = TrackerParams(n_particles_total=600)
+    params = TrackerParams(n_particles_total=600, motion_model=model)
     seeds = np.random.SeedSequence(9).spawn(n_agents)
     bank = TrackerBank(cfg, params, rngs=[np.random.default_rng(s) for s in seeds])
     trs = [NeighborTracker(cfg, i, params, np.random.default_rng(s)) for i, s in enumerate(seeds)]
@@ -344,10 +345,16 @@ def test_bank_equals_independent_trackers_bit_for_bit(n_agents):
             "ess",
             "velocity_est_body",
             "time_since_seen_s",
+            "mode_probs",
+            "velocity_cv_body",
         ):
             np.testing.assert_array_equal(getattr(e, f), getattr(eb, f), err_msg=f)
         np.testing.assert_array_equal(t.particles_body()[0], bank.particles_body(i)[0])
         np.testing.assert_array_equal(t.particle_headings(), bank.particle_headings(i))
+        np.testing.assert_array_equal(t.particle_modes(), bank.particle_modes(i))
+        np.testing.assert_array_equal(
+            t.particle_velocities_body(), bank.particle_velocities_body(i)
+        )
     np.testing.assert_array_equal(bank.n_recoveries, [t.n_recoveries for t in trs])
 
 
@@ -431,6 +438,7 @@ def test_vectorised_step_equals_slow_reference(scenario, params):
             np.testing.assert_allclose(s["vy"], new_state["vy"], atol=1e-9)
             np.testing.assert_allclose(est.mode_probs, ref["mode_probs"], atol=1e-12)
             np.testing.assert_allclose(est.velocity_est_body, ref["velocity"], atol=1e-9)
+            np.testing.assert_allclose(est.velocity_cv_body, ref["velocity_cv"], atol=1e-9)
         kinds.update(("det" if d else "undet") for d in est.detected)
     assert kinds == {"det", "undet"}
 
