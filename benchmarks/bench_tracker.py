@@ -4,6 +4,7 @@ Usage::
 
     .venv/bin/python benchmarks/bench_tracker.py [--p-totals 1000 2000 5000]
         [--n-agents 6 12 48] [--steps 100] [--repeats 3] [--json]
+        [--models auto static]   # motion models side by side (auto = the mode mixture)
 """
 
 from __future__ import annotations
@@ -22,9 +23,21 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--repeats", type=int, default=3, help="report the minimum over repeats")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
+    ap.add_argument(
+        "--models",
+        nargs="+",
+        default=["auto"],
+        choices=["auto", "mixture", "coverage", "crossing", "static"],
+        help="TrackerParams.motion_model values to time",
+    )
     args = ap.parse_args(argv)
     rows = bench_tracker(
-        args.p_totals, args.n_agents, steps=args.steps, repeats=args.repeats, seed=args.seed
+        args.p_totals,
+        args.n_agents,
+        steps=args.steps,
+        repeats=args.repeats,
+        seed=args.seed,
+        motion_models=args.models,
     )
     print(json.dumps(rows, indent=2) if args.json else format_table(rows))
 

@@ -64,18 +64,24 @@ def bench_tracker(
     seed: int = 0,
     single: bool = True,
     bank: bool = True,
+    motion_models: Iterable[str] = ("auto",),
 ) -> list[dict]:
     """Time the tracker per robot-step.
 
-    For each (P_T, N): a :class:`NeighborTracker` of robot 0 stepped alone
+    For each (P_T, N, motion model): a :class:`NeighborTracker` of robot 0 stepped alone
     (``single_ms_per_robot_step``) and a :class:`TrackerBank` of all N robots
     (``bank_ms_per_robot_step`` = bank step time / N), over ``steps`` recorded steps after
     ``warmup`` untimed ones; the minimum over ``repeats`` runs (the machine may be
     shared, and the minimum is the least disturbed).
 
+    ``motion_models``: :class:`TrackerParams` ``motion_model`` values (``"auto"`` is the
+    default mode mixture; ``"coverage"``, ``"crossing"``, ``"static"`` the paper's single
+    models, for comparison).
+
     Returns:
-        One dict per (P_T, N): ``p_total, n_agents, n_neighbours, steps, repeats,
-        single_ms_per_robot_step, bank_ms_per_robot_step`` (``None`` when skipped).
+        One dict per (P_T, N, model): ``p_total, n_agents, n_neighbours, motion_model,
+        steps, repeats, single_ms_per_robot_step, bank_ms_per_robot_step`` (``None`` when
+        skipped).
 
     Raises:
         ValueError: ``steps < 1``, ``warmup < 0`` or ``repeats < 1``.
@@ -89,22 +95,26 @@ def bench_tracker(
         episode = _record(int(n), warmup + steps, seed)
         cfg = episode[0]
         for p_total in p_totals:
-            params = TrackerParams(n_particles_total=int(p_total))
-            row: dict = {
-                "p_total": int(p_total),
-                "n_agents": int(n),
-                "n_neighbours": int(n) - 1,
-                "steps": int(steps),
-                "repeats": int(repeats),
-                "single_ms_per_robot_step": None,
-                "bank_ms_per_robot_step": None,
-            }
-            args = (cfg, params, *episode[1:], warmup, steps, seed)
-            if single:
-                row["single_ms_per_robot_step"] = min(_time_single(*args) for _ in range(repeats))
-            if bank:
-                row["bank_ms_per_robot_step"] = min(_time_bank(*args) for _ in range(repeats))
-            rows.append(row)
+            for model in motion_models:
+                params = TrackerParams(n_particles_total=int(p_total), motion_model=model)
+                row: dict = {
+                    "p_total": int(p_total),
+                    "n_agents": int(n),
+                    "n_neighbours": int(n) - 1,
+                    "motion_model": str(model),
+                    "steps": int(steps),
+                    "repeats": int(repeats),
+                    "single_ms_per_robot_step": None,
+                    "bank_ms_per_robot_step": None,
+                }
+                args = (cfg, params, *episode[1:], warmup, steps, seed)
+                if single:
+                    row["single_ms_per_robot_step"] = min(
+                        _time_single(*args) for _ in range(repeats)
+                    )
+                if bank:
+                    row["bank_ms_per_robot_step"] = min(_time_bank(*args) for _ in range(repeats))
+                rows.append(row)
     return rows
 
 
@@ -112,6 +122,7 @@ def bench_tracker(
 TABLE_COLUMNS = (
     ("P_T", "p_total"),
     ("N", "n_agents"),
+    ("model", "motion_model"),
     ("single ms/robot-step", "single_ms_per_robot_step"),
     ("bank ms/robot-step", "bank_ms_per_robot_step"),
 )

@@ -13,7 +13,17 @@ def test_bench_tracker_rows():
     assert len(rows) == 1
     r = rows[0]
     assert r["p_total"] == 100 and r["n_agents"] == 3 and r["n_neighbours"] == 2
+    assert r["motion_model"] == "auto"
     assert r["single_ms_per_robot_step"] > 0 and r["bank_ms_per_robot_step"] > 0
     assert "P_T" in format_table(rows)
     with pytest.raises(ValueError, match="steps"):
         bench_tracker(steps=0)
+    two = bench_tracker(
+        p_totals=(100,),
+        n_agents=(3,),
+        steps=1,
+        warmup=0,
+        repeats=1,
+        motion_models=("auto", "static"),
+    )
+    assert [r["motion_model"] for r in two] == ["auto", "static"]
