@@ -69,6 +69,7 @@ def plot_configuration(
     voronoi: bool = True,
     fov: bool = True,
     zoom_m: float | None = None,
+    reference: np.ndarray | None = None,
 ) -> None:
     """A team configuration (paper Fig. 5): density, sensing disks (radius R_s), camera
     FoV sectors (amplitude β, radius R_d, shaded), limited-range Voronoi cells, headings.
@@ -76,6 +77,8 @@ def plot_configuration(
     Args:
         poses: ``(N, 3)`` world ``[x m, y m, yaw rad]``.
         zoom_m: show only ``q_m ± zoom_m`` (m); None shows the arena.
+        reference: optional ``(N, 2)`` positions (m) drawn as grey dashed sensing disks,
+            e.g. the configuration of the optimal η.
     """
     from matplotlib.patches import Wedge
 
@@ -101,6 +104,11 @@ def plot_configuration(
             p[0], p[1], 1.5 * np.cos(poses[i, 2]), 1.5 * np.sin(poses[i, 2]),
             head_width=0.5, color="k",
         )  # fmt: skip
+    if reference is not None:
+        for p in np.asarray(reference, dtype=np.float64):
+            ax.add_patch(plt.Circle(tuple(p), config.sensing_radius_m, fill=False, color="0.4",
+                                    ls="--", lw=0.8))  # fmt: skip
+            ax.plot(*p, "+", color="0.3", ms=6)
     if zoom_m is not None:
         qx, qy = config.density_mean_m
         ax.set_xlim(qx - zoom_m, qx + zoom_m)
@@ -170,17 +178,19 @@ def plot_eta_bands(
     thresholds: Sequence[tuple[float, str]] = (),
     ylabel: str = "coverage efficiency η",
 ) -> None:
-    """η(t) per condition over seeds (paper Fig. 6): mean line, ± 1 std band, and the
-    10-90% range dotted; ``scale`` divides η (e.g. by the optimal η for the normalised
+    """η(t) per condition over seeds (paper Fig. 6): the mean line, the 25-75% band
+    shaded and the 10-90% range dotted (quantiles, not ± std: η is bounded and skewed
+    near its plateau); ``scale`` divides η (e.g. by the optimal η for the normalised
     panel). ``t_max`` and ``y_min`` zoom on the rise; ``thresholds`` are ``(level,
     label)`` horizontal lines."""
     for k, (label, series) in enumerate(curves.items()):
         arr = _stack(series) / scale
         t = np.arange(arr.shape[1]) * dt
-        m, s = arr.mean(0), arr.std(0)
+        m = arr.mean(0)
+        q1, q3 = np.quantile(arr, [0.25, 0.75], axis=0)
         c = f"C{k}"
         ax.plot(t, m, color=c, lw=1.6, label=f"{label} (n={len(series)})")
-        ax.fill_between(t, m - s, m + s, color=c, alpha=0.18, lw=0)
+        ax.fill_between(t, q1, q3, color=c, alpha=0.18, lw=0)
         lo, hi = np.quantile(arr, [0.1, 0.9], axis=0)
         ax.plot(t, lo, ":", color=c, lw=0.7)
         ax.plot(t, hi, ":", color=c, lw=0.7)

@@ -117,5 +117,5 @@ def test_report_numbers_are_traceable_to_results_json(quick_report):
     for e in data["crossing"]["episodes"]:
         assert f"| {e['seed']} | {e['arrived']} |" in md
     d = data["dense"]["rows"][0]
-    assert f"| {d['n_agents']} | {len(d['seeds'])} | {d['collisions']} |" in md
+    assert f"| {d['n_agents']} | {len(d['seeds'])} | {d['steps']} | {d['collisions']} |" in md
     assert math.isfinite(data["elapsed_s"]) and data["elapsed_s"] > 0
