@@ -748,8 +748,8 @@ def _figures(out: Path, res: dict[str, Any], ser: dict[str, Any], base: Any) -> 
 
         def avg(k: str) -> np.ndarray:
             a = np.array([np.asarray(c[k][:T], float) for c in cal])
-            with np.errstate(all="ignore"):
-                return np.nanmean(a, axis=0) if np.isfinite(a).any() else np.full(T, np.nan)
+            n = np.isfinite(a).sum(axis=0)  # steps where no seed had such a pair: NaN
+            return np.where(n > 0, np.nansum(a, axis=0) / np.maximum(n, 1), np.nan)
 
         fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
         plot_calibration(
