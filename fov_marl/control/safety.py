@@ -70,7 +70,11 @@ neighbours lie outside F_i (deletion, Eq. 4): they are exactly the belief about 
 the robot cannot see. Around the robot, ``K = blind_bins`` bearing sectors; in sector
 k the particles of undetected neighbours are sorted by range and the *representative*
 ``p_k`` is the first one at which the expected number of neighbours closer than it in
-that sector (each particle weighing ``1 / P_j``) exceeds ``blind_risk``. Its row
+that sector (each particle weighing ``1 / P_j``) exceeds ``blind_risk`` (default 0:
+the nearest particle, i.e. the support of the belief rather than a quantile; a
+quantile lets a robot whose beliefs went diffuse drive blind at full speed, since a
+spread-out cloud puts little mass anywhere, and an adversary that seeks its
+neighbours is exactly where that little mass is). Its row
 
     n_k · v ≤ max(v_b [h_k > 0], ρ γ h_k),     h_k = ‖p_k‖ − D_s − m_arc,  n_k = p_k / ‖p_k‖
 
