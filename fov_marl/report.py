@@ -945,7 +945,8 @@ def _markdown(res: dict[str, Any]) -> str:
         "**Reading of the paper's η = 1.** The paper's η (Eq. 21) is the density mass inside the "
         "union of the sensing disks, and it reports both teams reaching η = 1. Literally that "
         "needs a density six 6 m disks can cover entirely, such as the env default σ = 2.8 m, "
-        "where η = 0.99 is passed during the approach and the comparison does not discriminate "
+        "where every condition passes η = 0.99 during the approach, well before its robots "
+        "settle, so the literal time to 0.99 times the approach, not the final configuration "
         "(section a'). This report's headline uses σ = "
         f'{cov["density_sigma_m"]:g} m and reads "η = 1" as **η / η_opt = 1**, η_opt = '
         f"{cov['eta_optimal']:.4f} being the best η six disks can reach; the threshold is "
