@@ -263,6 +263,7 @@ def run_job(job: Job) -> dict[str, Any]:
     """Run one job; returns the JSON-ready result stored in the cache."""
     from fov_marl.baselines import make_policy
 
+    t0 = time.perf_counter()
     kw = job.run_kwargs
     probe: list[_CalibrationProbe] = []
     on_step = None
@@ -295,6 +296,7 @@ def run_job(job: Job) -> dict[str, Any]:
         e.close()
     if probe:
         out["calibration"] = probe[0].series
+    out["wall_s"] = time.perf_counter() - t0
     return out
 
 
@@ -322,6 +324,7 @@ class _Progress:
 
     def __init__(self, total: int, desc: str, enabled: bool = True) -> None:
         self.total, self.n, self.t0, self.desc = total, 0, time.perf_counter(), desc
+        self.hits = 0  # runs read from the cache
         self.enabled = enabled
         self.bar = None
         if enabled:
@@ -363,10 +366,12 @@ def _run_all(
                 k = futs[f]
                 res, hit = f.result()
                 results[k] = res
+                progress.hits += hit
                 progress.update(_note(jobs[k], hit))
     else:
         for k, j in enumerate(jobs):
             results[k], hit = _run_cached(j, cache, code)
+            progress.hits += hit
             progress.update(_note(j, hit))
     return results  # type: ignore[return-value]
 
@@ -620,6 +625,10 @@ def reproduce(
     figs = _figures(out, results, series, base)
     results["elapsed_s"] = time.perf_counter() - t_start
     results["runs_elapsed_s"] = t_runs
+    results["runs"] = bar.total
+    results["cached_runs"] = bar.hits
+    walls = [r.get("wall_s") for r in par + ser]
+    results["runs_wall_s_sum"] = None if None in walls else float(sum(walls))
     results["figures"] = figs
     (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
     (out / "series.json").write_text(json.dumps(series, default=_json_default))
@@ -930,8 +939,16 @@ def _markdown(res: dict[str, Any]) -> str:
         "# fov_marl: reproduction of Section VII",
         "",
         f"{'Quick (reduced) run' if res['quick'] else 'Full run'}: `fov-marl reproduce"
-        f"{' --quick' if res['quick'] else ''}`; runs {res['runs_elapsed_s'] / 60:.1f} min, "
-        f"total {res['elapsed_s'] / 60:.1f} min. Every number below is in `results.json` (the "
+        f"{' --quick' if res['quick'] else ''}`: {res['runs']} runs, {res['cached_runs']} of them "
+        f"read from `cache/`; this invocation took {res['elapsed_s'] / 60:.1f} min "
+        f"({res['runs_elapsed_s'] / 60:.1f} min running or reading the runs); the runs' own wall "
+        "time, summed over processes: "
+        + (
+            f"{res['runs_wall_s_sum'] / 60:.1f} min"
+            if res.get("runs_wall_s_sum") is not None
+            else "not recorded (cache written by an earlier version)"
+        )
+        + ". Every number below is in `results.json` (the "
         "key is named under each table); per-step series behind the figures are in "
         "`series.json`; each run is cached in `cache/` (keyed on its arguments and the code). "
         f"Code: commit `{res.get('git', {}).get('commit', '?')[:12]}`"
