@@ -41,6 +41,8 @@ class _Parser(argparse.ArgumentParser):
     """argparse, but errors are one line (no usage dump) and exit 2."""
 
     def error(self, message: str) -> None:  # type: ignore[override]
+        if message.rstrip().endswith("unrecognized arguments:"):  # only empty strings left
+            message = message.rstrip() + " '' (an empty argument)"
         self.exit(2, f"{self.prog}: error: {_one_line(message)}\n")
 
 

@@ -773,8 +773,8 @@ def test_hypothesis_flag_text(choice, text):
     if flag == "--policy":
         assume(not _is_path_like(text))
     spec = SPECS[command][flag]
-    if spec["good"] == [None]:  # a bare flag: give it a value, always an error
-        argv = (*_argv(command, _base(command)), f"{flag}={text}")
+    if spec["good"] == [None] or spec.get("either") == [None]:  # a bare flag: give it a
+        argv = (*_argv(command, _base(command)), f"{flag}={text}")  # value, always an error
     elif command == "bench":
         argv = _with(command, flag, [text])
     else:
