@@ -1,6 +1,9 @@
 """Neighbour estimation: one particle filter per neighbour in the robot's body frame, with
 deletion inside the camera's field of view and a fixed, re-allocated particle budget
-(paper Section IV-V).
+(paper Section IV-V). The default motion model is a mode mixture (static random walk,
+Eq. 20, Eq. 22, constant velocity, with Markov switching), calibrated whatever the
+neighbours do; the paper's single models are ``TrackerParams(motion_model="coverage" |
+"crossing" | "static")``. See :mod:`fov_marl.estimation.params`.
 
 Public API::
 
@@ -8,7 +11,7 @@ Public API::
     tracker = NeighborTracker.for_env(env, agent="robot_0", seed=0)
     tracker.reset(obs["robot_0"], initial_poses_world=env.poses)   # or None: uniform
     tracker.step(actions["robot_0"], obs["robot_0"])
-    est = tracker.estimate()
+    est = tracker.estimate()    # ellipses, d_ij, mode_probs (M, 4), velocity_est_body, ...
 
     bank = TrackerBank.for_env(env, seed=0)      # all robots at once, same numbers
     bank.reset(obs, initial_poses_world=env.poses); bank.step(actions, obs)

@@ -258,7 +258,7 @@ def mixture_predict(
     vy: np.ndarray,
     mode: np.ndarray,
     u_switch: np.ndarray,
-    noise: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    noise: tuple[np.ndarray, np.ndarray],
     qx: np.ndarray,
     qy: np.ndarray,
     *,
@@ -286,9 +286,15 @@ def mixture_predict(
       (:func:`fresh_velocity` with ``forward_bias``): a robot that changes behaviour
       may start in any direction, most likely ahead;
 
-    (3) it moves ``p + dt v + σ_pos[mode] n_p``; (4) its velocity state becomes the
+    (3) it moves ``p + dt v + σ_pos[mode] n``; (4) its velocity state becomes the
     velocity it moved with (only ``cv`` particles read it back: a switch into ``cv``
     draws afresh).
+
+    One standard normal pair ``n`` per particle drives both its position noise and its
+    velocity noise (``n_v = n`` above): for ``cv`` that is the white-acceleration
+    constant-velocity model, one noise per axis moving velocity and position together
+    (``p' = p + dt v + (dt σ_v + σ_pos) n``); it saves two draws per particle per step,
+    the largest cost of the mixture.
 
     Only particles in the coverage / crossing modes evaluate Eq. 20 / 22, and only the
     (rare) fresh ones draw a fresh velocity; everything else is computed for all
@@ -299,7 +305,7 @@ def mixture_predict(
         x, y, vx, vy: ``(...)`` positions (m) and velocity states (m/s) in the old Σ_i.
         h: ``(...)`` relative headings (rad), for the direction of fresh velocities.
         mode: ``(...)`` int8 modes; u_switch: ``(...)`` uniforms in [0, 1).
-        noise: four ``(...)`` standard normals ``(n_px, n_py, n_vx, n_vy)``.
+        noise: two ``(...)`` standard normals ``(n_x, n_y)``.
         qx, qy: q_m in the old Σ_i, broadcast against ``x``.
         dt: step (s); p_switch: per-step switching probability; cdf: ``(4,)`` prior.
         k_p, standoff_m: Eq. 20's gain (1/s) and standoff ρ (m); v_max: speed limit (m/s).
@@ -310,7 +316,8 @@ def mixture_predict(
     Returns:
         ``(x', y', vx', vy', mode')`` in the old Σ_i.
     """
-    n_px, n_py, n_vx, n_vy = noise
+    n_px, n_py = noise
+    n_vx, n_vy = noise
     mode, switched = switch_modes(mode, u_switch, p_switch, cdf)
     # cv (computed for every particle, zeroed for the others): velocity random walk
     is_cv = mode == MODE_CV

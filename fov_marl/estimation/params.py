@@ -241,9 +241,9 @@ class TrackerParams:
     mode_prior_coverage: float = 0.06
     mode_prior_crossing: float = 0.08
     mode_prior_cv: float = 0.54
-    mode_switch_rate_hz: float = 0.1
+    mode_switch_rate_hz: float = 0.12
     mixture_noise_m_per_sqrt_s: float = 1.25
-    cv_noise_m_per_sqrt_s: float = 0.18
+    cv_noise_m_per_sqrt_s: float = 0.15
     cv_velocity_noise_mps_per_sqrt_s: float = 0.08
     cv_forward_bias: float = 1.5
 

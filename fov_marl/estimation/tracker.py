@@ -48,13 +48,13 @@ The estimate describes the weighted set of step 5; the particles returned by
 
 Random draws per robot and step, in this order: ``standard_normal((3, P_T))`` process
 noise (x, y, heading); recovery draws, by ascending neighbour ID; ``random(M)``
-resampling offsets. The mixture changes the order thus (the single models are
-unchanged, bit for bit): the process noise is ``standard_normal((5, P_T))`` (x, y,
-heading, then the velocity noise x, y; the first three rows are the draws of the
-single models), followed by ``random(P_T)`` for the mode switches; each recovery draws
-its usual numbers and then ``standard_normal((2, P_j))`` for fresh velocities (modes of
-re-seeded particles are assigned by stratified prior quantiles, no draw); the reset
-draws ``standard_normal((2, P_T))`` fresh velocities after the initial cloud.
+resampling offsets. The mixture adds (the single models are unchanged, bit for bit):
+``random(P_T)`` for the mode switches right after the process noise (whose x, y normals
+also drive the velocity noise, see
+:func:`~fov_marl.estimation.kernels.mixture_predict`); each recovery draws its usual
+numbers and then ``standard_normal((2, P_j))`` for fresh velocities (modes of re-seeded
+particles are assigned by stratified prior quantiles, no draw); the reset draws
+``standard_normal((2, P_T))`` fresh velocities after the initial cloud.
 """
 
 from __future__ import annotations
@@ -236,7 +236,7 @@ class _BankCore:
         )
         self._sig_p = params.process_noise_m_per_sqrt_s * math.sqrt(self._dt)
         self._sig_h = params.heading_noise_rad_per_sqrt_s * math.sqrt(self._dt)
-        self._noise = np.empty((self._R, 5 if self._mix else 3, self._P))
+        self._noise = np.empty((self._R, 3, self._P))
         if self._mix:
             self._uni = np.empty((self._R, self._P))
             self._cdf = K.mode_cdf(params.mode_prior())
@@ -395,7 +395,7 @@ class _BankCore:
             self._vy,
             self._mode,
             self._uni,
-            (nz[:, 0], nz[:, 1], nz[:, 3], nz[:, 4]),
+            (nz[:, 0], nz[:, 1]),
             q[:, 0:1],
             q[:, 1:2],
             dt=self._dt,
@@ -422,9 +422,25 @@ class _BankCore:
         c = np.cos(yaw)
         s = np.sin(yaw)
         lo, hi = self._lo, self._hi
-        wx = np.minimum(np.maximum(px + c * x - s * y, lo), hi) - px
-        wy = np.minimum(np.maximum(py + s * x + c * y, lo), hi) - py
-        return c * wx + s * wy, c * wy - s * wx
+        # in place, in the same order of operations as
+        # wx = min(max(px + c x − s y, lo), hi) − px  (and wy), then R(yaw)ᵀ (wx, wy)
+        wx = c * x
+        wx += px
+        wx -= s * y
+        np.maximum(wx, lo, out=wx)
+        np.minimum(wx, hi, out=wx)
+        wx -= px
+        wy = s * x
+        wy += py
+        wy += c * y
+        np.maximum(wy, lo, out=wy)
+        np.minimum(wy, hi, out=wy)
+        wy -= py
+        bx = c * wx
+        bx += s * wy
+        by = c * wy
+        by -= s * wx
+        return bx, by
 
     # ------------------------------------------------------------------ update
     def _update(self, det, zx, zy, zh, pose) -> None:

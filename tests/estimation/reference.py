@@ -62,7 +62,8 @@ def mixture_predict_reference(
     inverse CDF of ``u / p``; the mode's velocity (static 0, Eq. 20, Eq. 22, cv random
     walk or a fresh forward-biased velocity after a switch); move with the mode's noise.
 
-    ``noise``: ``(4, n)`` standard normals (position x, y, velocity x, y); ``q``: q_m (2,).
+    ``noise``: ``(4, n)`` standard normals (position x, y, velocity x, y; the tracker passes
+    the same pair twice, see kernels.mixture_predict); ``q``: q_m (2,).
     Returns ``(x, y, vx, vy, mode)`` as new arrays.
     """
     prior = np.asarray(prior, dtype=np.float64) / np.sum(prior)
@@ -201,7 +202,7 @@ def reference_step(
     pose_new = integrate_unicycle(state["pose_prev"], v, om, dt)
     pose_new[:2] = np.clip(pose_new[:2], r_rob, L - r_rob)
 
-    noise = rng.standard_normal((5 if mix else 3, p_total))
+    noise = rng.standard_normal((3, p_total))
     u_switch = rng.random(p_total) if mix else None
     sig_p = params.process_noise_m_per_sqrt_s * math.sqrt(dt)
     sig_h = params.heading_noise_rad_per_sqrt_s * math.sqrt(dt)
@@ -215,7 +216,7 @@ def reference_step(
         if mix:
             px, py, vx, vy, mode = mixture_predict_reference(
                 state["x"][sl], state["y"][sl], state["h"][sl], state["vx"][sl],
-                state["vy"][sl], state["mode"][sl], u_switch[sl], noise[[0, 1, 3, 4], sl],
+                state["vy"][sl], state["mode"][sl], u_switch[sl], noise[[0, 1, 0, 1], sl],
                 state["goal_prev"], dt=dt, p_switch=-math.expm1(-params.mode_switch_rate_hz * dt),
                 prior=prior, k_p=params.k_p, v_max=cfg.v_max_mps, standoff=rho,
                 sig_pos=sig_mode, sig_vel=params.cv_velocity_noise_mps_per_sqrt_s * math.sqrt(dt),
