@@ -18,6 +18,7 @@ env is stepped. Outcomes (see ``tests/test_fuzz_env.py`` for the classes):
 from __future__ import annotations
 
 import math
+import re
 import sys
 import time
 from collections import Counter
@@ -133,6 +134,8 @@ class Case:
             shown = repr(self.value)[:50]
         except Exception:
             shown = type(self.value).__name__
+        # ids must be the same in every pytest-xdist worker: no memory addresses
+        shown = re.sub(r" at 0x[0-9a-fA-F]+", "", shown)
         return f"{self.target}: {AGENT}={shown} [{self.expect}]"
 
 
