@@ -699,6 +699,16 @@ def _assert_good(case: CliCase) -> None:
 
 
 # ------------------------------------------------------------------------- tests
+@pytest.fixture(autouse=True, scope="module")
+def _in_a_scratch_dir(tmp_path_factory):
+    """Fuzzed relative paths (``--json inf``, ``--out nan``) land in a scratch folder, never
+    in the checkout."""
+    old = os.getcwd()
+    os.chdir(tmp_path_factory.mktemp("fuzz_cwd"))
+    yield
+    os.chdir(old)
+
+
 def test_every_flag_of_every_command_is_fuzzed():
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
