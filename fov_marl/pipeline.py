@@ -29,6 +29,7 @@ robot's data: rows are independent (tested).
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Literal
 
@@ -271,6 +272,8 @@ class PfCbfPipeline:
             walls=par.walls,
             wall_gain=par.wall_gain,
             hold_band_m=par.safety_hold_band_m,
+            fov_rad=2.0 * math.pi if self.estimates == "oracle" else cfg.fov_rad,
+            blind_density_risk=par.blind_density_risk,
         )
 
     def _oracle(self, poses_world: np.ndarray | None) -> None:

@@ -69,6 +69,11 @@ field                        default   source / reason
                                        diffuse (σ 8 m) drove blind at 1 m/s into a
                                        neighbour it had lost (the chasing adversary, N = 8:
                                        1 contact in 6 episodes; 0 with 0.0)
+``blind_density_risk``       0.02      expected undetected neighbours (from the Gaussian
+                                       fits) per sector outside the camera's view above
+                                       which approaching the sector is forbidden
+                                       (:func:`~fov_marl.control.safety.
+                                       blind_density_rows`); 0 disables
 ``walls``                    True      arena walls as rows (the commanded velocity is the
                                        one the robot gets; no sliding)
 ``wall_gain``                2.5       γ_w (1/s) of the wall rows, γ_w dt ≤ 1
@@ -205,6 +210,7 @@ class ControllerParams:
         responsibility: ρ in (0, 1], share of the admissible closing per robot.
         blind_bins: K in [0, 360] bearing sectors of the blind rows (0: none).
         blind_risk: expected neighbours per sector tolerated, in [0, 1).
+        blind_density_risk: Gaussian-mass threshold of the density blind rows, [0, 1).
         walls: add the arena walls as rows.
         wall_gain: γ_w (1/s) of the wall rows, (0, 1e3].
         deadlock_turn_deg: turn of u*'s translation (degrees, to the right) tried when
@@ -259,6 +265,7 @@ class ControllerParams:
     responsibility: float = 0.5
     blind_bins: int = 16
     blind_risk: float = 0.0
+    blind_density_risk: float = 0.02
     walls: bool = True
     wall_gain: float = 2.5
     deadlock_turn_deg: float = 60.0
@@ -330,6 +337,7 @@ class ControllerParams:
         if self.blind_risk >= 1.0:
             raise ConfigError(f"blind_risk must be in [0.0, 1.0), got {self.blind_risk!r}")
         _check("wall_gain", self.wall_gain, 0.0, 1e3, lo_open=True)
+        _check("blind_density_risk", self.blind_density_risk, 0.0, 1.0)
         _check("deadlock_turn_deg", self.deadlock_turn_deg, 0.0, 180.0)
         _check("omega_weight", self.omega_weight, 0.0, 10.0, lo_open=True)
         _check("safety_speed_margin_mps", self.safety_speed_margin_mps, 0.0, 100.0)

@@ -287,3 +287,40 @@ def test_rows_shapes_and_padding():
     assert np.all(rows.kind[:, -4:] == ROW_WALL)
     real = ~pad
     np.testing.assert_allclose(np.linalg.norm(rows.A[real][:, :2], axis=1), 1.0)
+
+
+def test_density_blind_rows_fire_for_many_diffuse_beliefs_only_outside_the_view():
+    """23 lost neighbours with σ = 10 m clouds around the robot (a dense team): approaching
+    the sectors it cannot see is forbidden; 5 such neighbours (a sparse team) add no row;
+    detected neighbours and the camera's own sector never do; the count matches a Monte
+    Carlo estimate of the Gaussians' mass in the slice."""
+    from fov_marl.control.safety import blind_density_rows
+
+    rng = np.random.default_rng(4)
+    fov = math.radians(120.0)
+
+    def rows(m, detected=False):
+        mu = rng.normal(0.0, 6.0, (1, m, 2))
+        cov = np.tile(np.eye(2) * 100.0, (1, m, 1, 1))
+        det = np.full((1, m), detected)
+        return blind_density_rows(mu, cov, det, 16, 0.02, 2.83, fov)
+
+    _, b, _ = rows(23)
+    th = -math.pi + (np.arange(16) + 0.5) * (2 * math.pi / 16)
+    visible = np.abs(th) <= fov / 2 - math.pi / 16
+    assert np.all(np.isinf(b[0, visible]))
+    assert np.all(b[0, ~visible] == 0.0)
+    assert np.all(np.isinf(rows(5)[1]))
+    assert np.all(np.isinf(rows(23, detected=True)[1]))
+    # the approximation of the expected count against Monte Carlo (one wide neighbour)
+    mu = np.array([[[3.0, -2.0]]])
+    cov = np.array([[[[9.0, 2.0], [2.0, 6.0]]]])
+    k = 3
+    x = rng.multivariate_normal(mu[0, 0], cov[0, 0], 400_000)
+    ang = np.arctan2(x[:, 1], x[:, 0])
+    inside = (np.hypot(x[:, 0], x[:, 1]) < 2.83) & (
+        np.floor((ang + math.pi) / (2 * math.pi / 16)).astype(int) == k
+    )
+    for risk in (0.5 * inside.mean(), 2.0 * inside.mean()):
+        _, b1, _ = blind_density_rows(mu, cov, np.zeros((1, 1), bool), 16, risk, 2.83, fov)
+        assert (b1[0, k] == 0.0) == (risk < inside.mean())
