@@ -43,7 +43,7 @@ from fov_marl.control import (
     coverage_desired_inputs,
     crossing_desired_input,
 )
-from fov_marl.control.safety import SafetyRows, safety_rows
+from fov_marl.control.safety import SafetyRows, team_safety_rows
 from fov_marl.estimation import TrackerBank, TrackerParams
 from fov_marl.geometry import relative_pose
 from fov_marl.spaces import ObservationLayout, velocity_to_action
@@ -249,7 +249,9 @@ class PfCbfPipeline:
             parts = self._particles() if self.estimates == "tracker" else None
         else:
             mean, cov, det, parts = np.zeros((1, 0, 2)), np.zeros((1, 0, 2, 2)), None, None
-        return safety_rows(
+        return team_safety_rows(
+            cfg,
+            par,
             mean_body=mean,
             cov_body=cov,
             detected=det if det is not None else np.zeros((1, 0), dtype=bool),
@@ -257,23 +259,7 @@ class PfCbfPipeline:
             pose_world=self._own_pose,
             particles_body=None if parts is None else parts[0],
             particle_mass=None if parts is None else parts[1],
-            safety_distance_m=cfg.safety_distance_m,
-            v_max_mps=cfg.v_max_mps,
-            omega_max_radps=cfg.omega_max_radps,
-            dt_s=cfg.dt_s,
-            arena_size_m=cfg.arena_size_m,
-            robot_radius_m=cfg.robot_radius_m,
-            safety_risk=par.safety_risk,
-            safety_gain=par.safety_gain,
-            responsibility=par.responsibility,
-            blind_bins=par.blind_bins,
-            blind_risk=par.blind_risk,
-            blind_speed_mps=par.blind_speed_mps,
-            walls=par.walls,
-            wall_gain=par.wall_gain,
-            hold_band_m=par.safety_hold_band_m,
             fov_rad=2.0 * math.pi if self.estimates == "oracle" else cfg.fov_rad,
-            blind_density_risk=par.blind_density_risk,
         )
 
     def _oracle(self, poses_world: np.ndarray | None) -> None:

@@ -80,7 +80,7 @@ from fov_marl.control.cbf import (
 )
 from fov_marl.control.params import ControllerParams
 from fov_marl.control.qp import HierarchicalQP
-from fov_marl.control.safety import safety_rows
+from fov_marl.control.safety import team_safety_rows
 
 __all__ = ["ControlResult", "FovCbfController"]
 
@@ -285,29 +285,14 @@ class FovCbfController:
         if p.safety_model != "ellipse" or (safety is None and p_body.shape[0] == 0):
             return np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=np.int8)
         if safety is None:  # positions taken as exact: the neighbour rows alone
-            rows = safety_rows(
+            rows = team_safety_rows(
+                cfg,
+                p,
                 mean_body=p_body[None],
                 cov_body=np.zeros((1, p_body.shape[0], 2, 2)),
                 detected=np.ones((1, p_body.shape[0]), dtype=bool),
                 velocity_est_body=v_est_body[None],
-                pose_world=None,
-                particles_body=None,
-                particle_mass=None,
-                safety_distance_m=cfg.safety_distance_m,
-                v_max_mps=cfg.v_max_mps,
-                omega_max_radps=cfg.omega_max_radps,
-                dt_s=cfg.dt_s,
-                arena_size_m=cfg.arena_size_m,
-                robot_radius_m=cfg.robot_radius_m,
-                safety_risk=p.safety_risk,
-                safety_gain=p.safety_gain,
-                responsibility=p.responsibility,
-                blind_bins=0,
-                blind_risk=p.blind_risk,
-                blind_speed_mps=p.blind_speed_mps,
-                walls=False,
-                wall_gain=p.wall_gain,
-                hold_band_m=p.safety_hold_band_m,
+                blind=False,
             )
             safety = rows.robot(0)
         A, b, kind = (np.asarray(x) for x in safety)

@@ -124,6 +124,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtri
 
+from fov_marl.config import ScenarioConfig
+from fov_marl.control.params import ControllerParams
+
 __all__ = [
     "ROW_NEIGHBOUR",
     "ROW_BLIND",
@@ -137,6 +140,7 @@ __all__ = [
     "blind_density_rows",
     "hold_band",
     "safety_rows",
+    "team_safety_rows",
 ]
 
 #: masses within this of ``risk`` count as not exceeding it (the group sums are
@@ -331,6 +335,58 @@ def wall_clearances(
     nbx = c * e[None, :, 0] + s * e[None, :, 1]
     nby = -s * e[None, :, 0] + c * e[None, :, 1]
     return np.stack([nbx, nby], -1), w
+
+
+def team_safety_rows(
+    config: ScenarioConfig,
+    params: ControllerParams,
+    *,
+    mean_body: np.ndarray,
+    cov_body: np.ndarray,
+    detected: np.ndarray,
+    velocity_est_body: np.ndarray | None = None,
+    pose_world: np.ndarray | None = None,
+    particles_body: np.ndarray | None = None,
+    particle_mass: np.ndarray | None = None,
+    fov_rad: float | None = None,
+    blind: bool = True,
+) -> SafetyRows:
+    """:func:`safety_rows` with the scenario's quantities and the controller's knobs.
+
+    Args:
+        config: the scenario (D_s, v_max, ω_max, dt, arena, robot radius, β).
+        params: the controller parameters (the ``safety_*``, ``blind_*``, ``wall*`` and
+            ``responsibility`` fields).
+        fov_rad: β for the density blind rows (default ``config.fov_rad``; 2π: none).
+        blind: False leaves out the blind rows (no particles, no density rows).
+        The arrays: as in :func:`safety_rows`; ``pose_world=None`` gives no wall rows.
+    """
+    return safety_rows(
+        mean_body=mean_body,
+        cov_body=cov_body,
+        detected=detected,
+        velocity_est_body=velocity_est_body,
+        pose_world=pose_world if params.walls else None,
+        particles_body=particles_body,
+        particle_mass=particle_mass,
+        safety_distance_m=config.safety_distance_m,
+        v_max_mps=config.v_max_mps,
+        omega_max_radps=config.omega_max_radps,
+        dt_s=config.dt_s,
+        arena_size_m=config.arena_size_m,
+        robot_radius_m=config.robot_radius_m,
+        safety_risk=params.safety_risk,
+        safety_gain=params.safety_gain,
+        responsibility=params.responsibility,
+        blind_bins=params.blind_bins if blind else 0,
+        blind_risk=params.blind_risk,
+        blind_speed_mps=params.blind_speed_mps,
+        walls=params.walls,
+        wall_gain=params.wall_gain,
+        hold_band_m=params.safety_hold_band_m,
+        fov_rad=config.fov_rad if fov_rad is None else fov_rad,
+        blind_density_risk=params.blind_density_risk,
+    )
 
 
 def hold_band(h: np.ndarray, band_m: float) -> np.ndarray:
