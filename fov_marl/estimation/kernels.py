@@ -245,8 +245,10 @@ def switch_modes(
     """
     switched = u < p_switch
     new = mode.copy()
-    if p_switch > 0.0:
-        new[switched] = np.searchsorted(cdf, u[switched] / p_switch, side="right")
+    idx = np.flatnonzero(switched)
+    if idx.size:
+        ix = np.unravel_index(idx, switched.shape)
+        new[ix] = np.searchsorted(cdf, u[ix] / p_switch, side="right")
     return new, switched
 
 
@@ -329,27 +331,34 @@ def mixture_predict(
     f *= is_cv
     ux *= f
     uy *= f
-    # the rarer modes and the fresh velocities on their particles only
-    fresh = switched & is_cv
-    if fresh.any():
-        ux[fresh], uy[fresh] = fresh_velocity(
-            n_vx[fresh], n_vy[fresh], v_max, np.broadcast_to(h, x.shape)[fresh], forward_bias
+    # the rarer modes and the fresh velocities on their particles only (flat indices of
+    # the subset: the work is proportional to the subset, not to the whole array)
+    shape = x.shape
+
+    def subset(mask):
+        idx = np.flatnonzero(mask)
+        return np.unravel_index(idx, shape) if idx.size else None
+
+    sel = subset(switched & is_cv)
+    if sel is not None:
+        ux[sel], uy[sel] = fresh_velocity(
+            n_vx[sel], n_vy[sel], v_max, np.broadcast_to(h, shape)[sel], forward_bias
         )
-    sel = mode == MODE_COVERAGE
-    if sel.any():
+    sel = subset(mode == MODE_COVERAGE)
+    if sel is not None:
         ux[sel], uy[sel] = coverage_input(
             x[sel],
             y[sel],
-            np.broadcast_to(qx, x.shape)[sel],
-            np.broadcast_to(qy, x.shape)[sel],
+            np.broadcast_to(qx, shape)[sel],
+            np.broadcast_to(qy, shape)[sel],
             k_p,
             v_max,
             standoff_m,
         )
-    sel = mode == MODE_CROSSING
-    if sel.any():
+    sel = subset(mode == MODE_CROSSING)
+    if sel is not None:
         ux[sel], uy[sel] = crossing_input(x[sel], y[sel], v_max)
-    sig = sig_pos_by_mode[mode]
+    sig = np.take(sig_pos_by_mode, mode)
     xo = sig * n_px
     xo += x
     xo += dt * ux
