@@ -7,7 +7,8 @@ field                              default     reason
 =================================  ==========  ============================================
 ``n_particles_total``              2000        P_T, fixed budget per robot (authors: 10 000;
                                                2000 is calibrated up to N = 12 in the tests
-                                               and costs ~0.3 ms per robot-step in a bank)
+                                               and costs ~0.3 ms (single models) to ~0.4 ms
+                                               (mixture) per robot-step in a bank)
 ``min_particles_per_neighbour``    20          floor of each P_j so a far neighbour keeps a
                                                usable cloud; lowered to ``P_T // M`` when
                                                ``M * floor > P_T``
