@@ -29,6 +29,7 @@ robot's data: rows are independent (tested).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from typing import Literal
@@ -43,7 +44,12 @@ from fov_marl.control import (
     coverage_desired_inputs,
     crossing_desired_input,
 )
-from fov_marl.control.safety import SafetyRows, team_safety_rows
+from fov_marl.control.safety import (
+    SafetyRows,
+    blind_travel_reset,
+    blind_travel_step,
+    team_safety_rows,
+)
 from fov_marl.estimation import TrackerBank, TrackerParams
 from fov_marl.geometry import relative_pose
 from fov_marl.spaces import ObservationLayout, velocity_to_action
@@ -51,6 +57,8 @@ from fov_marl.spaces import ObservationLayout, velocity_to_action
 __all__ = ["PfCbfPipeline"]
 
 Estimates = Literal["tracker", "oracle"]
+#: the blind travel is forgotten once its direction is this far inside the view (degrees)
+_LOOK_MARGIN_DEG = 10.0
 
 
 class PfCbfPipeline:
@@ -167,6 +175,7 @@ class PfCbfPipeline:
         obs_m = self._obs_matrix(obs)
         self._read_cues(obs_m)
         self._applied = np.zeros((self.n, 3), dtype=np.float32)
+        self._blind_travel_world = np.zeros((self.n, 2))
         self._need_observe = False
         self.counters = {"interventions": 0, "fallbacks": 0, "safety_fallbacks": 0}
         self.last_results = [None] * self.n
@@ -182,6 +191,11 @@ class PfCbfPipeline:
             self.bank.reset(obs_m.astype(np.float32), initial_poses_world=init)
             self.last_timings = {"tracker": time.perf_counter() - t0}
             self._est = self._bank_estimate()
+            self._last_seen_world = np.full((self.n, self.n - 1, 2), np.nan)
+            if init is not None:  # the start poses count as seen at t = 0
+                cols = np.array([[j for j in range(self.n) if j != i] for i in range(self.n)])
+                self._last_seen_world = np.asarray(init, dtype=np.float64)[cols, :2]
+            self._update_last_seen()
         elif self.estimates == "oracle":
             self._oracle(initial_poses_world)
 
@@ -192,14 +206,44 @@ class PfCbfPipeline:
         """
         obs_m = self._obs_matrix(obs)
         self._read_cues(obs_m)
+        self._blind_travel_world = blind_travel_reset(
+            self._blind_travel_world,
+            self._own_pose[:, 2],
+            self.config.fov_rad,
+            math.radians(_LOOK_MARGIN_DEG),
+        )
         self.last_timings = {}
         if self.estimates == "tracker" and self.bank is not None:
             t0 = time.perf_counter()
             self.bank.step(self._applied, obs_m.astype(np.float32))
             self._est = self._bank_estimate()
+            self._update_last_seen()
             self.last_timings["tracker"] = time.perf_counter() - t0
         elif self.estimates == "oracle":
             self._oracle(poses_world)
+
+    def _update_last_seen(self) -> None:
+        """Carry the detected neighbours' estimates into Σ_w as their last-seen points
+        (rows of :func:`fov_marl.control.safety.last_seen_rows`)."""
+        det = self._est["detected"]
+        mu = self._est["mean_body"]
+        th = self._own_pose[:, 2:3]
+        c, s = np.cos(th), np.sin(th)
+        pw = np.stack(
+            [
+                self._own_pose[:, 0:1] + c * mu[..., 0] - s * mu[..., 1],
+                self._own_pose[:, 1:2] + s * mu[..., 0] + c * mu[..., 1],
+            ],
+            -1,
+        )
+        self._last_seen_world = np.where(det[..., None], pw, self._last_seen_world)
+
+    def _last_seen_body(self) -> np.ndarray:
+        """``(N, N − 1, 2)`` the last-seen points in each robot's Σ_i (NaN: never seen)."""
+        d = self._last_seen_world - self._own_pose[:, None, :2]
+        th = self._own_pose[:, 2:3]
+        c, s = np.cos(th), np.sin(th)
+        return np.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], -1)
 
     def _bank_estimate(self) -> dict[str, np.ndarray]:
         e = self.bank.estimate()
@@ -214,6 +258,7 @@ class PfCbfPipeline:
             "ellipse_a": e.ellipse_a,
             "ellipse_b": e.ellipse_b,
             "ellipse_psi": e.ellipse_psi,
+            "time_since_seen_s": e.time_since_seen_s,
         }
 
     def _particles(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -247,7 +292,11 @@ class PfCbfPipeline:
             if det is None:
                 det = np.ones(mean.shape[:2], dtype=bool)
             parts = self._particles() if self.estimates == "tracker" else None
+            tracked = self.estimates == "tracker" and self.bank is not None
+            last = self._last_seen_body() if tracked else None
+            age = e["time_since_seen_s"] if tracked else None
         else:
+            last = age = None
             mean, cov, det, parts = np.zeros((1, 0, 2)), np.zeros((1, 0, 2, 2)), None, None
         return team_safety_rows(
             cfg,
@@ -260,7 +309,17 @@ class PfCbfPipeline:
             particles_body=None if parts is None else parts[0],
             particle_mass=None if parts is None else parts[1],
             fov_rad=2.0 * math.pi if self.estimates == "oracle" else cfg.fov_rad,
+            last_seen_body=last,
+            last_seen_age_s=age,
+            blind_travel_body=None if self.estimates == "oracle" else self._blind_travel_body(),
         )
+
+    def _blind_travel_body(self) -> np.ndarray:
+        """``(N, 2)`` each robot's blind travel ``e`` in its Σ_i (m)."""
+        e = self._blind_travel_world
+        th = self._own_pose[:, 2]
+        c, s = np.cos(th), np.sin(th)
+        return np.stack([c * e[:, 0] + s * e[:, 1], -s * e[:, 0] + c * e[:, 1]], -1)
 
     def _oracle(self, poses_world: np.ndarray | None) -> None:
         if poses_world is None:
@@ -292,6 +351,31 @@ class PfCbfPipeline:
         self.last_timings["lloyd"] = time.perf_counter() - t0
         return np.asarray(u, dtype=np.float64).reshape(self.n, 3)
 
+    def _look_before_leap(self, u_star: np.ndarray) -> np.ndarray:
+        """Turn a robot that has spent most of its blind travel budget towards it.
+
+        Where ``‖e‖ ≥ ¾ B`` (:func:`fov_marl.control.safety.blind_travel_step`) and u*
+        still translates along ``e``, u*'s yaw rate becomes ``sat(look_gain · φ_e)``,
+        φ_e the bearing of ``e`` in Σ_i: the robot looks where it has been going, which
+        releases the budget (the FoV levels, above u*, keep priority). Returns u*
+        unchanged otherwise (and for the oracle, or with the budget disabled).
+        """
+        par = self.controller_params
+        if self.estimates != "tracker" or par.blind_travel_m <= 0.0:
+            return u_star
+        e = self._blind_travel_body()
+        r = np.hypot(e[:, 0], e[:, 1])
+        along = np.einsum("ij,ij->i", e, u_star[:, :2]) > 0.0
+        look = (r >= 0.75 * par.blind_travel_m) & along
+        if not np.any(look):
+            return u_star
+        gain = par.look_gain if par.look_gain > 0.0 else 3.0
+        w_max = self.config.omega_max_radps
+        out = u_star.copy()
+        phi = np.arctan2(e[:, 1], e[:, 0])
+        out[:, 2] = np.where(look, np.clip(gain * phi, -w_max, w_max), u_star[:, 2])
+        return out
+
     def filter(self, u_star: np.ndarray) -> np.ndarray:
         """Safe body-frame inputs ``(N, 3)`` closest to ``u_star`` (Eq. 19) per robot.
 
@@ -305,6 +389,9 @@ class PfCbfPipeline:
         cfg = self.config
         u_star = np.asarray(u_star, dtype=np.float64).reshape(self.n, 3)
         t0 = time.perf_counter()
+        u_nominal = u_star
+        u_star = self._look_before_leap(u_star)
+        looked = u_star[:, 2] != u_nominal[:, 2]
         u = u_star.copy()
         ellipse = self.controller_params.safety_model == "ellipse"
         if self.use_cbf and (self.n > 1 or (ellipse and self.controller_params.walls)):
@@ -330,6 +417,11 @@ class PfCbfPipeline:
                     safety=None if rows is None else rows.robot(i),
                     detected=e["detected"][i] if "detected" in e else None,
                 )
+                if looked[i] and not res.intervened:  # the look turn is an intervention
+                    w_nom = np.clip(u_nominal[i, 2], -cfg.omega_max_radps, cfg.omega_max_radps)
+                    tol = self.controller_params.intervention_tol
+                    if abs(res.u[2] - w_nom) > tol:
+                        res = dataclasses.replace(res, intervened=True)
                 self.last_results[i] = res
                 u[i] = res.u
                 self.counters["interventions"] += int(res.intervened)
@@ -338,4 +430,13 @@ class PfCbfPipeline:
         self.last_timings["qp"] = time.perf_counter() - t0
         act = velocity_to_action(u[:, :2], u[:, 2], cfg.v_max_mps, cfg.omega_max_radps)
         self._applied = act
+        if self.estimates == "tracker":
+            v = act[:, :2].astype(np.float64) * cfg.v_max_mps
+            self._blind_travel_world = blind_travel_step(
+                self._blind_travel_world,
+                v,
+                self._own_pose[:, 2],
+                cfg.dt_s,
+                self.controller_params.blind_travel_memory_s,
+            )
         return act

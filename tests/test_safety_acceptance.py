@@ -41,6 +41,58 @@ def test_pfcbf_team_at_120_settles_near_ideal():
     assert rec.final_eta >= ideal.final_eta - 0.005, (rec.final_eta, ideal.final_eta)
 
 
+def _stress(episode, **controller):
+    from fov_marl.stress import StressCase, run_stress_episode
+
+    kw = {"filter_kwargs": {"controller_params": controller}} if controller else {}
+    return run_stress_episode(StressCase("head_on", 12, 120.0, "random", **kw), episode, 300)
+
+
+@pytest.mark.parametrize("episode", [1, 2])
+def test_filter_head_on_dense_team_regressions(episode):
+    """The two collisions the wider sweep found after the first round (head-on adversary,
+    N = 12, β = 120°): episode 1, a robot sliding blind at 1 m/s into one it had not seen
+    in 26 s (blind travel budget); episode 2, a robot backing into one it had turned away
+    from (last-seen rows). ``test_filter_regressions_collide_without_the_new_rows``
+    (slow) shows both collide without them."""
+    ep = _stress(episode)
+    assert ep["collisions"] == 0, ep
+    assert ep["min_distance_m"] > 1.0, ep
+
+
+def test_filter_lets_a_robot_travel_blind_only_its_budget_before_it_looks():
+    """One robot commanded sideways (body frame) at full speed forever, alone in the
+    arena: it gets at most B (+ one step) from where it last looked along its way, is
+    then turned to look (the nominal yaw rate is 0, so the turn counts as an
+    intervention) and goes on: it is never stuck."""
+    from fov_marl.envs import fov_coverage_v0
+    from fov_marl.wrappers import SafetyFilterWrapper
+    from fov_marl.wrappers.safety_filter import FILTER_CONTROLLER_DEFAULTS
+
+    poses = np.array([[10.0, 20.0, 0.0], [35.0, 35.0, 0.0]])
+    env = SafetyFilterWrapper(
+        fov_coverage_v0.parallel_env(n_agents=2, initial_poses=poses, fov_deg=120.0)
+    )
+    env.reset(seed=0)
+    budget = FILTER_CONTROLLER_DEFAULTS["blind_travel_m"]
+    step_m = env.unwrapped.config.v_max_mps * env.unwrapped.config.dt_s
+    cmd = {"robot_0": np.array([0.0, 1.0, 0.0], np.float32), "robot_1": np.zeros(3, np.float32)}
+    path = 0.0
+    turned = 0
+    for _ in range(80):
+        before = env.unwrapped.poses[0, :2].copy()
+        _, _, _, _, infos = env.step(cmd)
+        path += float(np.linalg.norm(env.unwrapped.poses[0, :2] - before))
+        e = env.pipeline._blind_travel_world[0]
+        assert np.linalg.norm(e) <= budget + step_m + 1e-9
+        s = infos["robot_0"]["safety"]
+        if abs(s["applied_action"][2]) > 0.1:
+            turned += 1
+            assert s["intervened"]
+    assert turned >= 5
+    assert path > 8.0, path
+
+
 # --------------------------------------------------------------------------- slow sweeps
 @pytest.mark.slow
 @pytest.mark.parametrize(
@@ -75,6 +127,16 @@ def test_crossing_all_arrive_without_collision_or_ds_violation():
         rec = run_episode("crossing", "pfcbf", seed, n_agents=4)
         assert rec.arrived == 4 and rec.collisions == 0, (seed, rec)
         assert rec.safety_violations == 0, (seed, rec)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "episode, off",
+    [(1, {"blind_travel_m": 0.0}), (2, {"last_seen_radius_m": 0.0, "blind_travel_m": 0.0})],
+)
+def test_filter_regressions_collide_without_the_new_rows(episode, off):
+    """The regression episodes above are not friendly: without the rows they collide."""
+    assert _stress(episode, **off)["collisions"] > 0
 
 
 @pytest.mark.slow

@@ -74,6 +74,22 @@ field                        default   source / reason
                                        which approaching the sector is forbidden
                                        (:func:`~fov_marl.control.safety.
                                        blind_density_rows`); 0 disables
+``last_seen_radius_m``       5.0       a neighbour lost from view gets a row "do not
+                                       approach where it was last seen" while that
+                                       point is nearer than this and out of view
+                                       (:func:`~fov_marl.control.safety.
+                                       last_seen_rows`); 0 disables. Measured: a robot
+                                       that turned away from a neighbour seen 2.8 m off
+                                       backed blind into it 7 s later; the belief's mean
+                                       had drifted 14 m away with the coverage mode
+``blind_travel_m``           0.0       B: how far a robot may get (net displacement)
+                                       from where it last looked along its direction
+                                       of travel before it must look there
+                                       (:func:`~fov_marl.control.safety.
+                                       blind_travel_step`); 0 disables (pfcbf's
+                                       default; the safety filter uses 1.0 m)
+``blind_travel_memory_s``    30.0      T: time constant (s) of the leak of the blind
+                                       travel (jitter is forgiven, persistence is not)
 ``walls``                    True      arena walls as rows (the commanded velocity is the
                                        one the robot gets; no sliding)
 ``wall_gain``                2.5       γ_w (1/s) of the wall rows, γ_w dt ≤ 1
@@ -211,6 +227,10 @@ class ControllerParams:
         blind_bins: K in [0, 360] bearing sectors of the blind rows (0: none).
         blind_risk: expected neighbours per sector tolerated, in [0, 1).
         blind_density_risk: Gaussian-mass threshold of the density blind rows, [0, 1).
+        last_seen_radius_m: range (m) within which a lost neighbour's last-seen
+            point keeps its row, [0, 100]; 0 disables.
+        blind_travel_m: B in [0, 100] (m), the blind travel budget; 0 disables.
+        blind_travel_memory_s: T in (0, 1e6] (s), the leak of the blind travel.
         walls: add the arena walls as rows.
         wall_gain: γ_w (1/s) of the wall rows, (0, 1e3].
         deadlock_turn_deg: turn of u*'s translation (degrees, to the right) tried when
@@ -266,6 +286,9 @@ class ControllerParams:
     blind_bins: int = 16
     blind_risk: float = 0.0
     blind_density_risk: float = 0.02
+    last_seen_radius_m: float = 5.0
+    blind_travel_m: float = 0.0
+    blind_travel_memory_s: float = 30.0
     walls: bool = True
     wall_gain: float = 2.5
     deadlock_turn_deg: float = 60.0
@@ -338,6 +361,9 @@ class ControllerParams:
             raise ConfigError(f"blind_risk must be in [0.0, 1.0), got {self.blind_risk!r}")
         _check("wall_gain", self.wall_gain, 0.0, 1e3, lo_open=True)
         _check("blind_density_risk", self.blind_density_risk, 0.0, 1.0)
+        _check("last_seen_radius_m", self.last_seen_radius_m, 0.0, 100.0)
+        _check("blind_travel_m", self.blind_travel_m, 0.0, 100.0)
+        _check("blind_travel_memory_s", self.blind_travel_memory_s, 0.0, 1e6, lo_open=True)
         _check("deadlock_turn_deg", self.deadlock_turn_deg, 0.0, 180.0)
         _check("omega_weight", self.omega_weight, 0.0, 10.0, lo_open=True)
         _check("safety_speed_margin_mps", self.safety_speed_margin_mps, 0.0, 100.0)

@@ -324,3 +324,111 @@ def test_density_blind_rows_fire_for_many_diffuse_beliefs_only_outside_the_view(
     for risk in (0.5 * inside.mean(), 2.0 * inside.mean()):
         _, b1, _ = blind_density_rows(mu, cov, np.zeros((1, 1), bool), 16, risk, 2.83, fov)
         assert (b1[0, k] == 0.0) == (risk < inside.mean())
+
+
+def test_last_seen_rows_forbid_approaching_where_a_lost_neighbour_was():
+    """A neighbour lost 2.8 m behind the robot: once the disk it can have reached covers
+    D_s, the row forbids any speed towards the point and nothing else (moving away, or
+    sideways, stays free); a point in view, beyond the radius, never seen, or of a
+    detected neighbour gives no row; while the disk is small the robot may approach at
+    the shared discrete-time rate."""
+    from fov_marl.control.safety import last_seen_rows
+
+    fov = math.radians(120.0)
+    kw = dict(radius_m=5.0, reach_sigma_m=0.74, v_max_mps=1.0, fov_rad=fov, detection_range_m=10.0)
+    c = np.array([[[-2.8, 0.0], [2.8, 0.0], [-6.0, 0.0], [np.nan, np.nan], [0.0, 3.0]]])
+    det = np.array([[False, False, False, False, True]])
+    n, h = last_seen_rows(c, np.full((1, 5), 1.0), det, **kw)
+    assert np.isfinite(h[0]).tolist() == [True, False, False, False, False]
+    np.testing.assert_allclose(n[0, 0], [-1.0, 0.0])
+    np.testing.assert_allclose(h[0, 0], 2.8 - 0.74 - 1.0)
+
+    def rows(age):
+        return _rows(
+            mean_body=np.array([[[20.0, 15.0]]]),  # the belief has drifted far away
+            cov_body=np.tile(np.eye(2) * 4.0, (1, 1, 1, 1)),
+            detected=np.zeros((1, 1), bool),
+            last_seen_body=np.array([[[-2.8, 0.0]]]),
+            last_seen_age_s=np.array([[age]]),
+            last_seen_radius_m=5.0,
+            reach_sigma_m=0.74,
+            detection_range_m=10.0,
+            fov_rad=fov,
+        )
+
+    late = rows(2.0)
+    A, b, kind = late.robot(0)
+    row = np.flatnonzero((A[:, 0] > 0.99) & (kind == ROW_BLIND))
+    assert row.size == 1 and b[row[0]] == 0.0  # −vx ≤ 0: no backing towards it
+    for u, ok in (([-0.5, 0.0, 0.0], False), ([0.5, 0.0, 0.0], True), ([0.0, 1.0, 0.0], True)):
+        assert bool(np.all(A[row] @ np.array(u) + b[row] >= -1e-12)) == ok, u
+    early = rows(0.0)
+    A0, b0, k0 = early.robot(0)
+    r0 = np.flatnonzero((A0[:, 0] > 0.99) & (k0 == ROW_BLIND))
+    m_arc = arc_margin(CFG.v_max_mps, CFG.omega_max_radps, CFG.dt_s)
+    gain = ControllerParams().responsibility * ControllerParams().safety_gain
+    np.testing.assert_allclose(b0[r0[0]], gain * (2.8 - 0.74 - CFG.safety_distance_m - m_arc))
+
+
+def test_pipeline_carries_last_seen_points_into_the_body_frame():
+    """The pipeline's last-seen point of a detected neighbour is its estimate; after the
+    robot turns away, the point (in the new body frame) is where the neighbour really is
+    when it stood still, within the measurement noise."""
+    from fov_marl.envs import fov_coverage_v0
+    from fov_marl.pipeline import PfCbfPipeline
+
+    poses = np.array([[10.0, 10.0, 0.0], [12.8, 10.0, math.pi], [30.0, 30.0, 0.0]])
+    env = fov_coverage_v0.parallel_env(n_agents=3, initial_poses=poses, fov_deg=120.0)
+    obs, _ = env.reset(seed=1)
+    pipe = PfCbfPipeline(env.config)
+    pipe.reset(obs, seed=1, initial_poses_world=poses)
+    spin = {a: np.array([0.0, 0.0, 0.0], np.float32) for a in env.agents}
+    spin["robot_0"] = np.array([0.0, 0.0, 1.0], np.float32)  # turn at ω_max
+    for _ in range(11):  # ~ 3.3 rad: robot 1 ends behind robot 0
+        obs, *_ = env.step(spin)
+        pipe._applied = np.stack([spin[a] for a in env.agents])
+        pipe.observe(obs)
+    assert not pipe._est["detected"][0, 0]
+    last = pipe._last_seen_body()[0, 0]
+    truth = world_to_body(env.poses[1, :2], env.poses[0])
+    assert np.linalg.norm(last - truth) < 1.0, (last, truth)
+    rows = pipe.safety_rows()
+    A, b, kind = rows.robot(0)
+    n = last / np.linalg.norm(last)
+    towards = np.flatnonzero((kind == ROW_BLIND) & (np.abs(A[:, :2] @ n + 1.0) < 1e-9))
+    assert towards.size == 1 and b[towards[0]] == 0.0
+
+
+def test_blind_travel_is_the_net_displacement_since_the_robot_looked_that_way():
+    """e sums the world-frame displacement (jitter cancels, moving back undoes travel),
+    leaks with its time constant, and is zeroed once its direction comes into view."""
+    from fov_marl.control.safety import blind_travel_reset, blind_travel_step
+
+    yaw = np.array([0.0, math.pi / 2])
+    e = np.zeros((2, 2))
+    e = blind_travel_step(e, np.array([[0.0, 1.0], [1.0, 0.0]]), yaw, 0.2)
+    np.testing.assert_allclose(e, [[0.0, 0.2], [0.0, 0.2]], atol=1e-12)  # both went +y
+    e = blind_travel_step(e, np.array([[0.0, -1.0], [0.0, 0.0]]), yaw, 0.2)
+    np.testing.assert_allclose(e[0], [0.0, 0.0], atol=1e-12)  # came back
+    leaky = blind_travel_step(np.array([[1.0, 0.0]]), np.zeros((1, 2)), yaw[:1], 0.2, 10.0)
+    np.testing.assert_allclose(leaky, [[math.exp(-0.02), 0.0]])
+    fov = math.radians(120.0)
+    e = np.array([[0.0, 1.0], [0.0, 1.0]])  # +y in the world
+    out = blind_travel_reset(e, np.array([0.0, math.pi / 2]), fov, math.radians(10.0))
+    np.testing.assert_allclose(out, [[0.0, 1.0], [0.0, 0.0]])  # robot 1 faces +y
+
+
+def test_blind_travel_row_stops_travel_along_the_budget_only():
+    """‖e‖ ≥ B: no speed along e (the robot may stop, go back, sideways); ‖e‖ < B: at most
+    what is left of the budget in one step."""
+    full = _rows(blind_travel_body=np.array([[0.0, 1.0]]), blind_travel_m=1.0)
+    A, b, kind = full.robot(0)
+    row = np.flatnonzero(np.abs(A[:, 1] + 1.0) < 1e-12)
+    assert row.size == 1 and kind[row[0]] == ROW_BLIND and b[row[0]] == 0.0
+    for u, ok in (([0.0, 0.3, 0.0], False), ([0.0, -1.0, 0.0], True), ([1.0, 0.0, 1.0], True)):
+        assert bool(A[row[0]] @ np.array(u) + b[row[0]] >= 0.0) == ok, u
+    part = _rows(blind_travel_body=np.array([[0.0, 0.9]]), blind_travel_m=1.0)
+    A, b, _ = part.robot(0)
+    row = np.flatnonzero(np.abs(A[:, 1] + 1.0) < 1e-12)
+    np.testing.assert_allclose(b[row[0]], 0.1 / CFG.dt_s)
+    assert _rows(blind_travel_body=np.zeros((1, 2)), blind_travel_m=1.0).robot(0)[0].shape[0] == 0
