@@ -6,9 +6,10 @@ Run (from the repository root, with the ``[rllib]`` extra installed)::
     python examples/rllib_ppo.py --iterations 50 --n-agents 6 --safety-filter
     python examples/rllib_ppo.py --iterations 1 --train-batch-size 200 --max-cycles 50
 
-Each iteration samples ``--train-batch-size`` env steps (N agent-steps each) in the driver process (no
-remote workers), runs PPO's SGD epochs, and prints the mean episode return (summed over
-the team, once episodes have ended), the agent-steps so far and the wall time. At the end
+Each iteration samples ``--train-batch-size`` env steps (N agent-steps each) in the
+driver process (no remote workers), runs PPO's SGD epochs, and prints the mean episode
+return (summed over the team, once episodes have ended), the env steps so far and the
+wall time. At the end
 it saves a checkpoint when ``--out DIR`` is given and prints a JSON summary line.
 
 The env, the shared-policy mapping and the PPO settings come from
