@@ -34,6 +34,7 @@ import numpy as np
 
 from fov_marl.baselines import make_policy
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
+from fov_marl.infos import has_safety, metrics_of, safety_of
 from fov_marl.metrics import optimal_eta, time_to_eta
 
 __all__ = [
@@ -192,7 +193,7 @@ def run_episode(
     speeds: list[float] = []
     path = 0.0
     prev_xy = env.unwrapped.poses[:, :2]
-    m = infos[env.possible_agents[0]]["metrics"]
+    m = metrics_of(infos[env.possible_agents[0]])
     if "eta" in m:
         eta_series.append(m["eta"])
     mind_series.append(float(m["min_distance"]))
@@ -220,10 +221,10 @@ def run_episode(
         steps += 1
         info0 = infos[env.possible_agents[0]]
         t_filter = 0.0
-        if "safety" in info0:
+        if has_safety(info0):
             have_filter = True
             t_filter = float(getattr(env, "last_cpu_s", 0.0))
-            saf = [infos[a]["safety"] for a in infos]
+            saf = [safety_of(infos[a]) for a in infos]
             interventions += sum(int(x["intervened"]) for x in saf)
             fallbacks += sum(int(x["fallback"]) for x in saf)
             safety_fb += sum(int(x["status"] == "safety_fallback") for x in saf)
@@ -242,7 +243,7 @@ def run_episode(
         speeds.append(float(step_len.mean()) / dt)
         path += float(step_len.mean())
         cpu.append((t_policy + t_filter) * 1e3 / n)
-        m = info0["metrics"]
+        m = metrics_of(info0)
         if "eta" in m:
             eta_series.append(m["eta"])
         mind_series.append(float(m["min_distance"]))

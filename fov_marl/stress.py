@@ -20,11 +20,11 @@ key                         meaning
 ``min_distance_m``          smallest pairwise centre distance over all episodes (m),
                             ``metrics["min_distance_episode"]``, the start included
 ``robot_steps``             robot-steps run (Σ over steps of the live robots)
-``intervention_rate``       fraction of robot-steps with ``infos[a]["safety"]["intervened"]``
+``intervention_rate``       fraction of robot-steps with ``infos[a]["safety/intervened"]``
 ``mean_action_change``      mean over robot-steps of ‖u − u*‖₂ in action units (the
                             ``applied_action`` − ``nominal_action`` difference, a 3-vector
                             of normalised ``[vx, vy, ω]``)
-``fallbacks``               robot-steps with ``infos[a]["safety"]["fallback"]``
+``fallbacks``               robot-steps with ``infos[a]["safety/fallback"]``
 ``statuses``                robot-steps per filter ``status`` string
 ==========================  ====================================================================
 
@@ -62,6 +62,7 @@ from fov_marl.adversaries import (
     make_adversary,
     make_start_poses,
 )
+from fov_marl.infos import metrics_of, safety_of
 
 __all__ = [
     "StressCase",
@@ -208,7 +209,7 @@ def run_stress_episode(case: StressCase, seed: int, steps: int) -> dict[str, Any
     obs, infos = env.reset(seed=seed)
     adversary.reset(seed=int(np.random.SeedSequence([seed, _POLICY_STREAM]).generate_state(1)[0]))
     d_s = base.config.safety_distance_m
-    metrics = next(iter(infos.values()))["metrics"]
+    metrics = metrics_of(next(iter(infos.values())))
     n_steps = robot_steps = viol_rs = intervened = fallbacks = 0
     du_sum = 0.0
     first_collision = None
@@ -217,7 +218,7 @@ def run_stress_episode(case: StressCase, seed: int, steps: int) -> dict[str, Any
         obs, _, _, _, infos = env.step(adversary.act(obs))
         n_steps += 1
         robot_steps += len(infos)
-        metrics = next(iter(infos.values()))["metrics"]
+        metrics = metrics_of(next(iter(infos.values())))
         if first_collision is None and metrics["collisions_total"] > 0:
             first_collision = n_steps
         if base.config.n_agents > 1:
@@ -227,7 +228,7 @@ def run_stress_episode(case: StressCase, seed: int, steps: int) -> dict[str, Any
             live = np.array([base.agent_name_mapping[a] for a in infos], dtype=np.int64)
             viol_rs += int(np.sum(d[live].min(axis=1) < d_s))
         if case.filtered:
-            saf = [infos[a]["safety"] for a in infos]
+            saf = [safety_of(infos[a]) for a in infos]
             intervened += sum(bool(s["intervened"]) for s in saf)
             fallbacks += sum(bool(s["fallback"]) for s in saf)
             du = np.array(

@@ -18,6 +18,7 @@ from fov_marl.config import ScenarioConfig, make_config
 from fov_marl.envs.rendering import HumanWindow, RenderLayer, render_frame
 from fov_marl.envs.world import Camera, step_poses
 from fov_marl.geometry import world_to_body
+from fov_marl.infos import agent_infos
 from fov_marl.metrics import CoverageMetric, pairwise_distances
 from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, ObservationLayout, action_to_velocity
 from fov_marl.validation import ConfigError, as_real_vector, check_seed, describe
@@ -171,7 +172,7 @@ class FovEnvBase(ParallelEnv):
         col_i, viol_i = metrics.pop("_col_i"), metrics.pop("_viol_i")
         self._rewards_and_metrics(col_i, viol_i, metrics, reset=True)
         obs = self._observe()
-        infos = {a: {"metrics": dict(metrics)} for a in self.agents}
+        infos = agent_infos(self.agents, metrics)
         if self.render_mode == "human":
             self.render()
         return obs, infos
@@ -193,7 +194,7 @@ class FovEnvBase(ParallelEnv):
         rewards = {a: float(rew[self.agent_name_mapping[a]]) for a in agents}
         terminations = {a: bool(terminate) for a in agents}
         truncations = {a: bool(truncate and not terminate) for a in agents}
-        infos = {a: {"metrics": dict(metrics)} for a in agents}
+        infos = agent_infos(agents, metrics)
         if terminate or truncate:
             self.agents = []
         if self.render_mode == "human":

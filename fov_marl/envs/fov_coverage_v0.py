@@ -106,8 +106,9 @@ after ``max_cycles`` steps (also settable as the attribute ``env.max_cycles``);
 
 Info
 ----
-``infos[agent]["metrics"]`` (ground truth, for evaluation only, identical for every
-agent): ``eta`` (Eq. 21: φ-mass of the union of sensing disks of radius R_s,
+``infos[agent]["metrics/<name>"]`` (flat entries, :mod:`fov_marl.infos`; read them with
+``fov_marl.infos.metrics_of(info)["<name>"]``; ground truth, for evaluation only,
+identical for every agent): ``eta`` (Eq. 21: φ-mass of the union of sensing disks of radius R_s,
 φ normalised over the arena), ``t_s``, ``min_distance`` (m, this step),
 ``min_distance_episode``, ``collisions`` (pairs in contact this step),
 ``collisions_total`` (collision events so far: a pair entering contact counts once,

@@ -78,7 +78,8 @@ and can be hit).
 
 Info
 ----
-``infos[agent]["metrics"]`` (ground truth, evaluation only): ``t_s``, ``min_distance``,
+``infos[agent]["metrics/<name>"]`` (flat entries, :mod:`fov_marl.infos`; read them with
+``fov_marl.infos.metrics_of(info)``; ground truth, evaluation only): ``t_s``, ``min_distance``,
 ``min_distance_episode``, ``collisions``, ``collisions_total``, ``safety_violations``,
 ``safety_violations_total``, ``arrived`` (robots within tolerance now),
 ``arrived_ever`` (robots that have arrived at least once), ``mean_distance_to_target``,

@@ -115,6 +115,7 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
 from fov_marl.config import make_config
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
+from fov_marl.infos import metrics_of, safety_of
 from fov_marl.training.vec_env import ParallelEnvVecEnv
 from fov_marl.validation import (
     ConfigError,
@@ -273,7 +274,7 @@ class FovMetricsCallback(BaseCallback):
         ended: dict[int, list[dict]] = {}
         for info, done in zip(infos, dones, strict=True):
             k = int(info.get("env_index", 0))
-            safety = info.get("safety")
+            safety = safety_of(info)
             if isinstance(safety, dict) and "intervened" in safety:
                 self._interventions[k] = self._interventions.get(k, 0) + int(
                     bool(safety["intervened"])
@@ -283,7 +284,7 @@ class FovMetricsCallback(BaseCallback):
                 ended.setdefault(k, []).append(info)
         for k, slot_infos in ended.items():
             self.episodes += 1
-            metrics = slot_infos[0].get("metrics", {})
+            metrics = metrics_of(slot_infos[0])
             out: dict[str, float] = {}
             for key, name in self._METRICS.items():
                 if key in metrics:

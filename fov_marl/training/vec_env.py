@@ -30,9 +30,10 @@ time limits are not marked ``TimeLimit.truncated``. This adapter fixes all three
   ``info["TimeLimit.truncated"] = truncated and not terminated`` so SB3 bootstraps
   the value of time-limited (continuing) episodes. The reset's infos are in
   ``reset_infos[slot]``.
-* Infos: ``infos[slot]`` is a copy of the env's ``infos[agent]`` (for the fov envs:
-  ``"metrics"`` with ``eta``, ``collisions_total``, ... and, behind the safety filter,
-  ``"safety"``) plus ``"agent"`` (name), ``"agent_index"`` and ``"env_index"`` (the
+* Infos: ``infos[slot]`` is a copy of the env's ``infos[agent]`` (an
+  :class:`~fov_marl.infos.AgentInfo`; for the fov envs: flat ``"metrics/<name>"``
+  entries, read with :func:`fov_marl.infos.metrics_of`, and behind the safety filter
+  ``"safety/*"``) plus ``"agent"`` (name), ``"agent_index"`` and ``"env_index"`` (the
   copy). At ``done`` the metrics are those of the episode's last step, so a callback
   logs episode-level values (final η, ``collisions_total``) from ``infos`` where
   ``dones`` is True; log them once per copy (``agent_index == 0``) because every
@@ -64,6 +65,8 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvObs,
     VecEnvStepReturn,
 )
+
+from fov_marl.infos import AgentInfo
 
 __all__ = ["ParallelEnvVecEnv", "make_parallel_vec_env", "wrapper_chain"]
 
@@ -217,7 +220,7 @@ class ParallelEnvVecEnv(VecEnv):
         base = k * self.n_agents
         for i, a in enumerate(self.possible_agents):
             self._obs[base + i] = obs[a]
-            info = dict(infos.get(a, {}))
+            info = AgentInfo(infos.get(a, {}))
             info.update(agent=a, agent_index=i, env_index=k)
             self.reset_infos[base + i] = info
 
@@ -261,10 +264,10 @@ class ParallelEnvVecEnv(VecEnv):
                 s = base + i
                 o = np.asarray(obs[a], dtype=np.float32)
                 rewards[s] = rew[a]
-                info = {
-                    key: (dict(v) if isinstance(v, dict) else v)
+                info = AgentInfo(
+                    (key, (dict(v) if isinstance(v, dict) else v))
                     for key, v in env_infos.get(a, {}).items()
-                }
+                )
                 info.update(agent=a, agent_index=i, env_index=k)
                 if done:
                     dones[s] = True

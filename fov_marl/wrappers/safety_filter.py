@@ -9,20 +9,24 @@ observations and the actions actually applied. It is the same pipeline as the
 policy instead of Lloyd.
 
 Spaces, agents, rewards, terminations and truncations are those of the wrapped env.
-``infos[agent]["safety"]`` reports, per robot and step:
+``infos[agent]`` gains flat ``safety/*`` entries (:mod:`fov_marl.infos`; present at
+``reset()`` too, with neutral values), per robot and step:
 
-======================  ===========================================================
-key                     meaning
-======================  ===========================================================
-``nominal_action``      (3,) float32, the policy's action (clipped to [-1, 1])
-``applied_action``      (3,) float32, the action sent to the env
-``intervened``          bool, ‖u − u*‖ above the controller's tolerance
-``status``              str, QP outcome (``"unconstrained"``, ``"solved"``, ``"relaxed"``,
-                        ``"safety_fallback"``, ``"degraded"``, ``"qp_failed"``,
-                        ``"invalid_input"``; see :class:`~fov_marl.control.ControlResult`)
-``fallback``            bool, a fallback input was used (``"safety_fallback"``: the
-                        collision rows could not all be met)
-======================  ===========================================================
+==========================  =======================================================
+key                         meaning
+==========================  =======================================================
+``safety/nominal_action``   (3,) float32, the policy's action (clipped to [-1, 1])
+``safety/applied_action``   (3,) float32, the action sent to the env
+``safety/intervened``       bool, ‖u − u*‖ above the controller's tolerance
+``safety/status_code``      int, QP outcome (:data:`fov_marl.infos.SAFETY_STATUSES`:
+                            ``"unconstrained"``, ``"solved"``, ``"relaxed"``,
+                            ``"safety_fallback"``, ``"degraded"``, ``"qp_failed"``,
+                            ``"invalid_input"``; see :class:`~fov_marl.control.ControlResult`)
+``safety/fallback``         bool, a fallback input was used (``"safety_fallback"``: the
+                            collision rows could not all be met)
+==========================  =======================================================
+
+:func:`fov_marl.infos.safety_of` returns them as a dict with the ``status`` string.
 
 Wall-clock cost is kept out of ``infos`` (so equal seeds give equal infos): the
 attribute ``last_cpu_s`` holds the seconds the filter spent on the whole team in the
@@ -81,6 +85,7 @@ from pettingzoo.utils.wrappers import BaseParallelWrapper
 from fov_marl.control import ControllerParams
 from fov_marl.envs.rendering import draw_beliefs
 from fov_marl.estimation import TrackerParams
+from fov_marl.infos import reset_safety_infos, set_safety_infos
 from fov_marl.pipeline import PfCbfPipeline
 from fov_marl.spaces import action_to_velocity
 from fov_marl.validation import check_int, check_params
@@ -151,6 +156,7 @@ class SafetyFilterWrapper(BaseParallelWrapper):
         filter_seed = int(self._seed_rng.integers(2**63)) if seed is None else seed
         self.pipeline.reset(obs, seed=filter_seed, initial_poses_world=self.env.unwrapped.poses)
         self._ready = True
+        reset_safety_infos(infos)
         return obs, infos
 
     def step(self, actions: dict[str, Any]):
@@ -172,17 +178,16 @@ class SafetyFilterWrapper(BaseParallelWrapper):
         if obs:
             self.pipeline.observe(obs)
         t_filter += time.perf_counter() - t1
-        nominal = np.clip(act, -1.0, 1.0).astype(np.float32)
-        for a in infos:
-            i = base.agent_name_mapping[a]
-            res = self.pipeline.last_results[i]
-            infos[a]["safety"] = {
-                "nominal_action": nominal[i],
-                "applied_action": safe[i],
-                "intervened": bool(res.intervened) if res is not None else False,
-                "status": res.status if res is not None else "no_neighbours",
-                "fallback": bool(res.fallback) if res is not None else False,
-            }
+        res = self.pipeline.last_results
+        set_safety_infos(
+            infos,
+            base.agent_name_mapping,
+            np.clip(act, -1.0, 1.0),
+            safe,
+            [r is not None and bool(r.intervened) for r in res],
+            [r is not None and bool(r.fallback) for r in res],
+            [r.status if r is not None else "no_neighbours" for r in res],
+        )
         self.last_cpu_s = t_filter
         if not self.env.agents:
             self._ready = False

@@ -1,0 +1,130 @@
+"""BenchMARL task classes (imports benchmarl; use :mod:`fov_marl.integrations.benchmarl`)."""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable
+from typing import Any
+
+from benchmarl.environments import task_config_registry, tasks
+from benchmarl.environments.common import Task
+from benchmarl.environments.pettingzoo.common import PettingZooClass
+from benchmarl.utils import _read_yaml_config
+from tensordict import TensorDictBase
+from torchrl.envs import EnvBase
+
+from fov_marl.config import make_config
+from fov_marl.integrations.common import make_parallel_env
+from fov_marl.integrations.torchrl import GROUP, wrap
+from fov_marl.validation import describe
+
+__all__ = ["ENV_NAME", "FovMarlClass", "FovMarlTask"]
+
+ENV_NAME = "fov_marl"
+#: Task config keys that are not scenario config fields.
+WRAPPER_KEYS = ("safety_filter", "belief", "filter_kwargs", "belief_kwargs")
+
+
+class FovMarlClass(PettingZooClass):
+    """A fov_marl scenario as a BenchMARL task (continuous actions, global state).
+
+    ``config`` holds scenario config fields (``n_agents``, ``fov_deg``, ``max_cycles``,
+    ...; the paper's values by default) and the wrapper keys ``safety_filter``,
+    ``belief`` (bools), ``filter_kwargs``, ``belief_kwargs`` (dicts). It is validated
+    here, so a bad field raises ``ValueError`` naming it before any env is built.
+    """
+
+    def __init__(self, name: str, config: dict[str, Any] | None) -> None:
+        super().__init__(name=name, config=dict(config or {}))
+        scenario_fields = {k: v for k, v in self.config.items() if k not in WRAPPER_KEYS}
+        self.scenario_config = make_config(scenario=self.scenario, **scenario_fields)
+        # fail now, not in a collector worker: build (and discard) one env
+        make_parallel_env(self.scenario, **copy.deepcopy(self.config)).close()
+
+    @property
+    def scenario(self) -> str:
+        return self.name.lower()
+
+    def get_env_fun(
+        self, num_envs: int, continuous_actions: bool, seed: int | None, device: Any
+    ) -> Callable[[], EnvBase]:
+        if not continuous_actions:
+            raise ValueError("fov_marl tasks have continuous actions only (Box(-1, 1, (3,)))")
+        config = copy.deepcopy(self.config)
+        scenario = self.scenario
+
+        def make() -> EnvBase:
+            return wrap(
+                make_parallel_env(scenario, **copy.deepcopy(config)), seed=seed, device=device
+            )
+
+        return make
+
+    def supports_continuous_actions(self) -> bool:
+        return True
+
+    def supports_discrete_actions(self) -> bool:
+        return False
+
+    def has_state(self) -> bool:
+        return True
+
+    def has_render(self, env: EnvBase) -> bool:
+        return False  # rendering would pull torchvision's video writer
+
+    def max_steps(self, env: EnvBase) -> int:
+        return int(self.scenario_config.max_cycles)
+
+    @staticmethod
+    def env_name() -> str:
+        return ENV_NAME
+
+    @staticmethod
+    def log_info(batch: TensorDictBase) -> dict[str, float]:
+        """Episode-end ground truth: mean final η (coverage), arrivals (crossing),
+        collision events, over the episodes that ended in this batch."""
+        done = batch.get(("next", "done"))[..., 0]
+        if not bool(done.any()):
+            return {}
+        info = batch.get(("next", GROUP, "info"))
+        out: dict[str, float] = {}
+        for key, name in (
+            ("metrics/eta", "final_eta"),
+            ("metrics/arrived_ever", "final_arrived_ever"),
+            ("metrics/collisions_total", "final_collisions_total"),
+            ("metrics/safety_violations_total", "final_safety_violations_total"),
+        ):
+            if key in info.keys():
+                out[f"collection/fov/{name}"] = float(info.get(key)[..., 0][done].float().mean())
+        return out
+
+
+class FovMarlTask(Task):
+    """The fov_marl BenchMARL tasks: ``FovMarlTask.COVERAGE``, ``FovMarlTask.CROSSING``."""
+
+    COVERAGE = None
+    CROSSING = None
+
+    @staticmethod
+    def associated_class() -> type[FovMarlClass]:
+        return FovMarlClass
+
+    def get_from_yaml(self, path: str | None = None) -> FovMarlClass:
+        """The task with the paper's defaults (``path=None``) or a YAML file's config."""
+        if path is None:
+            return self.get_task(config={})
+        config = _read_yaml_config(path)
+        if not isinstance(config, dict):
+            raise ValueError(f"task config {path} must be a mapping, got {describe(config)}")
+        return self.get_task(config=config)
+
+
+def register() -> None:
+    """Add the tasks to BenchMARL's registries (``"fov_marl/coverage"``, ...); idempotent."""
+    if FovMarlTask not in tasks:
+        tasks.append(FovMarlTask)
+    for task in FovMarlTask:
+        task_config_registry[f"{ENV_NAME}/{task.name.lower()}"] = task
+
+
+register()

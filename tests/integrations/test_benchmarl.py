@@ -1,0 +1,126 @@
+"""BenchMARL: the shipped tasks build Experiments for MAPPO, IPPO and MASAC and run."""
+
+from __future__ import annotations
+
+import pickle
+import sys
+import time
+from importlib.util import find_spec
+
+import pytest
+
+from fov_marl.integrations.benchmarl import make_experiment
+
+# find_spec, not importorskip: importing benchmarl (torch, torchrl) at collection would
+# cost every xdist worker; the tests import FovMarlTask (which imports benchmarl) lazily
+pytestmark = pytest.mark.skipif(find_spec("benchmarl") is None, reason="needs benchmarl")
+
+
+def _tasks():
+    from fov_marl.integrations.benchmarl import FovMarlTask
+
+    return FovMarlTask
+
+
+TINY = {
+    "max_n_iters": 1,
+    "evaluation": False,
+    "on_policy_collected_frames_per_batch": 40,
+    "on_policy_n_envs_per_worker": 2,
+    "on_policy_minibatch_size": 20,
+    "on_policy_n_minibatch_iters": 1,
+    "off_policy_collected_frames_per_batch": 40,
+    "off_policy_n_envs_per_worker": 2,
+    "off_policy_n_optimizer_steps": 2,
+    "off_policy_train_batch_size": 16,
+    "off_policy_memory_size": 1000,
+}
+
+
+@pytest.mark.parametrize("algorithm", ["mappo", "ippo", "masac"])
+def test_one_iteration_of_each_algorithm(algorithm, tmp_path):
+    tv_before = "torchvision" in sys.modules
+    task = _tasks().COVERAGE.get_task({"n_agents": 3, "max_cycles": 20})
+    exp = make_experiment(algorithm, task, seed=0, save_folder=str(tmp_path), **TINY)
+    assert exp.group_map == {"robot": ["robot_0", "robot_1", "robot_2"]}
+    assert exp.max_steps == 20 and exp.continuous_actions
+    exp.run()
+    assert exp.n_iters_performed == 1 and exp.total_frames == 40
+    if not tv_before:  # the BenchMARL path never imports torchvision (broken beside CPU torch)
+        assert "torchvision" not in sys.modules
+
+
+def test_safety_filter_and_crossing_tasks_run(tmp_path):
+    task = _tasks().COVERAGE.get_task(
+        {
+            "n_agents": 3,
+            "max_cycles": 10,
+            "safety_filter": True,
+            "filter_kwargs": {"tracker_params": {"n_particles_total": 300}},
+        }
+    )
+    exp = make_experiment("mappo", task, save_folder=str(tmp_path), **TINY)
+    assert "safety/status_code" in exp.info_spec["robot", "info"].keys()
+    exp.run()
+    task = _tasks().CROSSING.get_task({"max_cycles": 10})
+    exp = make_experiment("ippo", task, save_folder=str(tmp_path), **TINY)
+    exp.run()
+    assert exp.total_frames == 40 and len(exp.group_map["robot"]) == 4
+
+
+def test_log_info_reports_episode_end_metrics():
+    from fov_marl.integrations.torchrl import make_env
+
+    env = make_env(n_agents=3, max_cycles=5, seed=0)
+    batch = env.rollout(10, break_when_any_done=False)
+    out = _tasks().COVERAGE.get_task({}).log_info(batch)
+    eta = batch["next", "robot", "info", "metrics/eta"][[4, 9], 0].mean().item()
+    assert out["collection/fov/final_eta"] == pytest.approx(eta)
+    assert "collection/fov/final_collisions_total" in out
+    assert _tasks().COVERAGE.get_task({}).log_info(batch[:3]) == {}
+
+
+def test_defaults_registry_pickling_and_errors():
+    from benchmarl.environments import task_config_registry, tasks
+
+    task = _tasks().COVERAGE.get_from_yaml()
+    assert task.config == {} and task.max_steps(None) == 1000  # the paper's defaults
+    assert task_config_registry["fov_marl/coverage"] is _tasks().COVERAGE
+    assert task_config_registry["fov_marl/crossing"] is _tasks().CROSSING
+    assert _tasks() in tasks
+    clone = pickle.loads(pickle.dumps(task))  # BenchMARL pickles the task into config.pkl
+    assert clone == task and clone.scenario_config == task.scenario_config
+    with pytest.raises(ValueError, match="fov_deg"):
+        _tasks().COVERAGE.get_task({"fov_deg": -5.0})
+    with pytest.raises(ValueError, match="unknown"):
+        _tasks().COVERAGE.get_task({"n_robots": 3})
+    with pytest.raises(ValueError, match="safety_filter must be True or False"):
+        _tasks().COVERAGE.get_task({"safety_filter": "yes"})
+    with pytest.raises(ValueError, match="continuous actions only"):
+        task.get_env_fun(1, False, 0, "cpu")
+    with pytest.raises(ValueError, match=r"algorithm must be one of \['mappo'"):
+        make_experiment("dqn")
+    with pytest.raises(ValueError, match="experiment_overrides: unknown field 'max_iters'"):
+        make_experiment("mappo", task, max_iters=3)
+
+
+@pytest.mark.slow
+def test_mappo_trains_a_few_iterations(tmp_path):
+    """5 MAPPO iterations x 1,200 frames on N = 4 (time printed for the closing note)."""
+    task = _tasks().COVERAGE.get_task({"n_agents": 4, "max_cycles": 100})
+    exp = make_experiment(
+        "mappo",
+        task,
+        save_folder=str(tmp_path),
+        max_n_iters=5,
+        evaluation=False,
+        on_policy_collected_frames_per_batch=1200,
+        on_policy_n_envs_per_worker=4,
+        on_policy_minibatch_size=300,
+        on_policy_n_minibatch_iters=4,
+    )
+    t0 = time.perf_counter()
+    exp.run()
+    wall = time.perf_counter() - t0
+    print(f"benchmarl mappo: 5 iterations x 1200 frames in {wall:.1f} s")
+    assert exp.n_iters_performed == 5 and exp.total_frames == 6000
