@@ -266,7 +266,10 @@ class BatchHierarchicalQP:
         na = self._G_adm.shape[0]
         G = np.concatenate([A, np.broadcast_to(self._G_adm, (R, na, 3))], axis=1)
         hh = np.concatenate(
-            [lo - np.einsum("rkn,rn->rk", A, u_star), self._h_adm[None, :] - u_star @ self._G_adm.T],
+            [
+                lo - np.einsum("rkn,rn->rk", A, u_star),
+                self._h_adm[None, :] - u_star @ self._G_adm.T,
+            ],
             axis=1,
         )
         mask = np.concatenate([rowmask, np.ones((R, na), dtype=bool)], axis=1)
@@ -345,7 +348,9 @@ class BatchHierarchicalQP:
         n_levels = np.zeros(R, dtype=np.int64)
         u_out = np.zeros((R, 3))
         finite = (
-            np.isfinite(A).all(axis=(1, 2)) & np.isfinite(b).all(axis=1) & np.isfinite(u_star).all(1)
+            np.isfinite(A).all(axis=(1, 2))
+            & np.isfinite(b).all(axis=1)
+            & np.isfinite(u_star).all(1)
         )
         status[~finite] = _INV
         fallback[~finite] = True
@@ -381,10 +386,12 @@ class BatchHierarchicalQP:
         tol, tol_fix = _TOL_CHECK, _TOL_FIX
         A, b, level, valid = A0[rows], b0[rows], l0[rows], v0[rows]
         u_star, u_c = us0[rows], uc0[rows].copy()
-        R, K = b.shape
+        R, K0 = b.shape
         ar = np.arange(R)[:, None]
-        # sort by level (padding last), stable
+        # sort by level (padding last), stable; keep only as many columns as rows exist
         order = np.argsort(np.where(valid, level, _BIG_LEVEL), axis=1, kind="stable")
+        K = max(int(valid.sum(axis=1).max(initial=0)), 1)
+        order = order[:, :K]
         As, bs, ls, vs = A[ar, order], b[ar, order], level[ar, order], valid[ar, order]
         key = np.concatenate([As, bs[..., None]], axis=2)
         same = np.abs(key[:, :, None, :] - key[:, None, :, :]).max(axis=3) <= _DUP_TOL
@@ -395,7 +402,7 @@ class BatchHierarchicalQP:
         o2 = np.argsort(~keep, axis=1, kind="stable")
         order = order[ar, o2]
         As, bs, ls, keep = As[ar, o2], bs[ar, o2], ls[ar, o2], keep[ar, o2]
-        dup_orig = np.zeros((R, K), dtype=bool)
+        dup_orig = np.zeros((R, K0), dtype=bool)
         dup_orig[ar, order] = vs[ar, o2] & ~keep  # original index -> is a removed duplicate
         nr = keep.sum(axis=1)
         jj = np.arange(K)[None, :]
@@ -513,7 +520,9 @@ class BatchHierarchicalQP:
                 u_c[g] = ug
                 running[g[done[g] >= nr[g]]] = False
         # finish
-        st = np.where(degraded, _DEG, np.where(ks.max(axis=1, initial=0.0) > _KAPPA_REPORT, _REL, _SOL))
+        st = np.where(
+            degraded, _DEG, np.where(ks.max(axis=1, initial=0.0) > _KAPPA_REPORT, _REL, _SOL)
+        )
         st = np.where(nq == 0, _UNC, st)
         fb = degraded.copy()
         u_fin = u_c.copy()
@@ -534,7 +543,7 @@ class BatchHierarchicalQP:
         fb[failed] = True
         u_fin[failed] = 0.0
         # expand κ back to the original row order (duplicates: their own violation)
-        kap = np.zeros((R, K))
+        kap = np.zeros((R, K0))
         ks_use = np.where(failed[:, None], ks_fail, ks)
         u_k = np.where(failed[:, None], u_fail, u_fin)
         kap[ar, order] = np.where(keep, ks_use, 0.0)
