@@ -80,6 +80,10 @@ def test_vector_filter_equals_per_copy_filters(module, n, controller):
     refs = [SafetyFilterWrapper(module.parallel_env(**kw)) for _ in range(B)]
     obs, _ = venv.reset(seed=seed)
     ref_obs = [r.reset(seed=seed + k)[0] for k, r in enumerate(refs)]
+    for k in range(B):
+        np.testing.assert_array_equal(
+            obs[k], np.stack([ref_obs[k][a] for a in venv.possible_agents])
+        )
     agents = venv.possible_agents
     rng = np.random.default_rng(1)
     n_done = 0
