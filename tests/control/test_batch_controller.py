@@ -225,3 +225,18 @@ def test_batched_equals_loop_on_recorded_pfcbf_episode(scenario):
         act = pl.filter(u)
         obs, *_ = env.step({a: act[i] for i, a in enumerate(env.agents)})
     assert {"unconstrained", "solved"} <= set(seen)
+
+
+def test_bench_batched_filter_reports_both_variants():
+    from fov_marl.control.benchmark import bench_batched_filter
+
+    rows = bench_batched_filter(n_copies=(2,), n_agents=3, steps=2, warmup=1)
+    (r,) = rows
+    assert r["robots"] == 6 and r["robot_steps"] == 12
+    assert r["batched_ms"] > 0 and r["looped_ms"] > 0 and r["speedup"] > 0
+    assert r["max_action_diff"] <= 1e-6
+    assert set(r["batched_stage_ms"]) == {"tracker", "safety_rows", "qp", "lloyd"}
+    (p,) = bench_batched_filter(n_copies=(2,), n_agents=3, steps=1, warmup=0, policy="pfcbf")
+    assert p["max_action_diff"] <= 1e-6 and p["batched_stage_ms"]["lloyd"] > 0
+    with pytest.raises(ValueError, match="policy"):
+        bench_batched_filter(policy="nope")
