@@ -136,10 +136,7 @@ def batch_least_distance(
         gram = np.einsum("rkn,rln->rkl", N, N)
         gram[:, ar, ar] += np.where(valid, 0.0, 1.0)
         rhs = np.einsum("rkn,rn->rk", N, gp)
-        try:
-            r = np.linalg.solve(gram, rhs[..., None])[..., 0]
-        except np.linalg.LinAlgError:
-            r = np.einsum("rkl,rl->rk", np.linalg.pinv(gram), rhs)
+        r = _solve_spd(gram, rhs)
         r = np.where(valid, r, 0.0)
         z = gp - np.einsum("rkn,rk->rn", N, r)
         zz = np.einsum("rn,rn->r", z, gp)
@@ -196,6 +193,36 @@ def batch_least_distance(
         ok[run] = False
         y[run] = 0.0
     return y, ok
+
+
+def _solve_spd(gram: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``gram⁻¹ rhs`` for ``(R, k, k)`` Gram matrices (closed form for k ≤ 3)."""
+    k = gram.shape[-1]
+    if k == 1:
+        return rhs / gram[:, 0]
+    if k == 3:
+        a, b, c = gram[:, 0, 0], gram[:, 0, 1], gram[:, 0, 2]
+        d, e, f = gram[:, 1, 1], gram[:, 1, 2], gram[:, 2, 2]
+        c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+        det = a * c00 + b * c01 + c * c02
+        scale = (a * d * f) + 1e-300
+        good = np.abs(det) > 1e-12 * np.abs(scale)
+        if good.all():
+            c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
+            x, y, z = rhs[:, 0], rhs[:, 1], rhs[:, 2]
+            inv = 1.0 / det
+            return np.stack(
+                [
+                    (c00 * x + c01 * y + c02 * z) * inv,
+                    (c01 * x + c11 * y + c12 * z) * inv,
+                    (c02 * x + c12 * y + c22 * z) * inv,
+                ],
+                -1,
+            )
+    try:
+        return np.linalg.solve(gram, rhs[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return np.einsum("rkl,rl->rk", np.linalg.pinv(gram), rhs)
 
 
 @dataclass
