@@ -327,9 +327,8 @@ class BatchHierarchicalQP:
         hh[:, :nc] = -b_l - np.einsum("rkn,rn->rk", A_l, u_star)
         hh[:, nc : nc + K] = lo_fix - np.einsum("rkn,rn->rk", A, u_star)
         hh[:, nc + K :] = self._h_adm[None, :] - u_star @ self._G_adm.T
+        # rows of robots with fewer level rows are masked out; their κ variables stay 0
         mask = np.concatenate([lmask, fixmask, np.ones((R, na), dtype=bool)], axis=1)
-        # padded κ columns of robots with fewer level rows: pin them with a harmless row
-        G[:, :nc][~lmask] = 0.0
         y, ok = batch_least_distance(G, hh, mask)
         return u_star + y[:, :3] * sc, ok
 
@@ -385,13 +384,10 @@ class BatchHierarchicalQP:
         u_out[finite] = u_c0[finite]
         tol = _TOL_CHECK
         res0 = np.einsum("rkn,rn->rk", A, u_c0) + b
-        lv = np.where(valid, level, _BIG_LEVEL)
-        ls_all = np.sort(lv, axis=1)
-        distinct = valid.copy()
+        ls_all = np.sort(np.where(valid, level, _BIG_LEVEL), axis=1)
         distinct_sorted = np.ones((R, K), dtype=bool)
         distinct_sorted[:, 1:] = ls_all[:, 1:] != ls_all[:, :-1]
         n_lev_all = np.count_nonzero(distinct_sorted & (ls_all != _BIG_LEVEL), axis=1)
-        del distinct
         meets = np.where(valid, res0, np.inf).min(axis=1, initial=np.inf) >= -tol
         easy = finite & meets
         k0 = np.where(valid, np.maximum(0.0, -res0), 0.0)

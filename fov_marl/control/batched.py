@@ -31,7 +31,6 @@ from fov_marl.control.cbf import (
     SAFETY_ROW,
     cbf_rows,
     fov_barrier_lie,
-    motion_cone_rows,
     normalise_rows,
     row_h_max,
 )
@@ -143,16 +142,10 @@ class BatchedFovCbfController:
         # the per-robot controller validates the parameters and holds the cone rows
         self._ref = FovCbfController(config, self.params)
         self.h_max = row_h_max(config, p.fov_margin_m)
-        G, h = motion_cone_rows(
-            config.fov_rad,
-            p.blind_speed_mps,
-            config.v_max_mps,
-            math.radians(p.cone_half_angle_deg),
-        )
+        # the motion-cone rows exactly as the per-robot controller normalises them
         self._cone_A = self._ref._cone_A
         self._cone_b = self._ref._cone_b
         self._cone_half_angle = self._ref._cone_half_angle
-        del G, h
         self._w = float(p.omega_weight)
         self.qp = BatchHierarchicalQP(
             config.v_max_mps, config.omega_max_radps * self._w, p.n_polygon, p.cascade_reg
