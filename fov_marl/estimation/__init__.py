@@ -16,9 +16,26 @@ Public API::
     bank = TrackerBank.for_env(env, seed=0)      # all robots at once, same numbers
     bank.reset(obs, initial_poses_world=env.poses); bank.step(actions, obs)
     est_all = bank.estimate(); est_all.robot(k)
+
+    vbank = VectorTrackerBank(config, params, n_copies=B)   # B env copies, one set of arrays
+    vbank.reset(obs_bnd, initial_poses_world=poses_bn3, seeds=[s + k for k in range(B)])
+    vbank.step(actions_bn3, obs_bnd); vbank.reset_copies(done_mask, obs_bnd, poses_bn3, seeds)
 """
 
 from fov_marl.estimation.params import TrackerParams
-from fov_marl.estimation.tracker import BankEstimate, NeighborTracker, TrackerBank, TrackerEstimate
+from fov_marl.estimation.tracker import (
+    BankEstimate,
+    NeighborTracker,
+    TrackerBank,
+    TrackerEstimate,
+    VectorTrackerBank,
+)
 
-__all__ = ["NeighborTracker", "TrackerBank", "TrackerParams", "TrackerEstimate", "BankEstimate"]
+__all__ = [
+    "NeighborTracker",
+    "TrackerBank",
+    "TrackerParams",
+    "TrackerEstimate",
+    "BankEstimate",
+    "VectorTrackerBank",
+]

@@ -72,7 +72,7 @@ from fov_marl.estimation.params import TrackerParams
 from fov_marl.geometry import chi2_2dof, confidence_ellipse, ellipse_distance, world_to_body
 from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, ObservationLayout, action_to_velocity
 
-__all__ = ["TrackerEstimate", "BankEstimate", "TrackerBank", "NeighborTracker"]
+__all__ = ["TrackerEstimate", "BankEstimate", "TrackerBank", "NeighborTracker", "VectorTrackerBank"]
 
 
 @dataclass(frozen=True)
@@ -204,14 +204,19 @@ class _BankCore:
         params: TrackerParams,
         agent_indices: np.ndarray,
         rngs: list[np.random.Generator],
+        copy_index: np.ndarray | None = None,
     ) -> None:
         n = config.n_agents
         m = n - 1
         self.config = config
         self.params = params
         self.agent_indices = agent_indices
-        self._rngs = rngs
+        self._rngs = list(rngs)
         self._R = agent_indices.size
+        # env copy of each row (a vector bank); neighbour IDs are within the copy
+        self._copy = (
+            np.zeros(self._R, dtype=np.int64) if copy_index is None else np.asarray(copy_index)
+        )
         self._M = m
         self._P = int(params.n_particles_total)
         lays = [ObservationLayout(n, int(a)) for a in agent_indices]
@@ -269,7 +274,8 @@ class _BankCore:
         return det, zx, zy, zh, pose, goal
 
     def reset(self, obs_arr: np.ndarray, init: np.ndarray | None) -> None:
-        """Eq. 1 (``init`` (N, 3) known world poses, or None: uniform), then the first update."""
+        """Eq. 1 (``init`` (N, 3) or, per copy, (B, N, 3) known world poses, or None:
+        uniform), then the first update."""
         det, zx, zy, zh, pose, goal = self._parse(obs_arr)
         R, M, P = self._R, self._M, self._P
         self._counts = np.tile(K.equal_split(P, M), (R, 1)) if M else np.zeros((R, 0), np.int64)
@@ -279,8 +285,9 @@ class _BankCore:
         self._h = np.empty((R, P))
         if M:
             if init is not None:
-                rel = world_to_body(init[self._ids][..., :2], pose[:, None, :])  # (R, M, 2)
-                rel_h = K.wrap(init[self._ids][..., 2] - pose[:, None, 2])
+                init_r = (init[None] if init.ndim == 2 else init)[self._copy[:, None], self._ids]
+                rel = world_to_body(init_r[..., :2], pose[:, None, :])  # (R, M, 2)
+                rel_h = K.wrap(init_r[..., 2] - pose[:, None, 2])
                 gl = self._gid.reshape(R, P) - (np.arange(R) * M)[:, None]
                 for k, g in enumerate(self._rngs):
                     nz = g.standard_normal((3, P))
@@ -312,7 +319,7 @@ class _BankCore:
                     local, self._block_len[self._gid], self._cdf
                 ).reshape(R, P)
         self._tss = np.zeros((R, M))
-        self._time_s = 0.0
+        self._time = np.zeros(R)
         self.n_recoveries_detection[:] = 0
         self.n_recoveries_deleted[:] = 0
         self.initialised = True
@@ -336,7 +343,7 @@ class _BankCore:
         if self._M:
             self._predict(act, pose)
         self._tss += self._dt
-        self._time_s += self._dt
+        self._time += self._dt
         self._update(det, zx, zy, zh, pose)
         self._pose_prev = pose
         self._goal_prev = goal
@@ -673,9 +680,34 @@ class _BankCore:
             counts=self._counts,
             detected=self._det,
             time_since_seen_s=self._tss,
-            time_s=self._time_s,
+            time_s=self._time,
             **self._est,
         )
+
+    def particles_all(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(p_body (R, P, 2), owner (R, P) neighbour ID)`` of every row (new arrays)."""
+        p = np.stack([self._x, self._y], -1)
+        local = self._gid.reshape(self._R, self._P) - (np.arange(self._R) * self._M)[:, None]
+        return p, np.take_along_axis(self._ids, local, axis=1) if self._M else local
+
+    #: per-row state (leading row axis) replaced by :meth:`splice`
+    _ROW_STATE = (
+        "_x", "_y", "_h", "_counts", "_tss", "_time", "_pose_prev", "_goal_prev", "_det",
+        "n_recoveries_detection", "n_recoveries_deleted", "_mode", "_vx", "_vy",
+        "_mode_probs", "_v_cv",
+    )  # fmt: skip
+
+    def splice(self, rows: np.ndarray, other: _BankCore) -> None:
+        """Replace rows ``rows`` by the rows of ``other`` (a core of those robots, reset on
+        its own): state, estimate and Generators; the other rows keep every number."""
+        for name in self._ROW_STATE:
+            if hasattr(other, name):
+                getattr(self, name)[rows] = getattr(other, name)
+        for key, val in other._est.items():
+            self._est[key][rows] = val
+        for j, r in enumerate(np.asarray(rows).tolist()):
+            self._rngs[r] = other._rngs[j]
+        self._set_blocks()
 
     def particles_body(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         p = np.stack([self._x[k], self._y[k]], -1)
@@ -958,7 +990,7 @@ class TrackerBank:
         return BankEstimate(
             agent_indices=_ro(self.agent_indices),
             confidence=float(self.params.confidence),
-            time_s=float(parts[0]["time_s"]),
+            time_s=float(parts[0]["time_s"][0]),
             **arrays,
         )
 
@@ -1135,3 +1167,210 @@ class NeighborTracker:
         """``(P_T, 2)`` velocity states (m/s); see
         :meth:`TrackerBank.particle_velocities_body`."""
         return self._bank.particle_velocities_body(0)
+
+
+class VectorTrackerBank:
+    """The tracker banks of ``B`` env copies of an ``N``-robot team in one set of arrays.
+
+    Row ``k N + i`` is robot i of copy k; its neighbour IDs are those of copy k, and it
+    draws only from its own Generator: child i of ``SeedSequence(seeds[k])``, exactly as
+    ``TrackerBank(config, params, seed=seeds[k])`` for copy k alone. Every number of
+    copy k is therefore bit-identical to that separate bank under the same inputs
+    (tested), and :meth:`reset_copies` restarts some copies without touching the others
+    (an env copy that finished its episode).
+
+    Args:
+        config: the scenario (N robots per copy).
+        params: tracker parameters (default :class:`TrackerParams()`).
+        n_copies: B ≥ 1.
+
+    Raises:
+        ValueError: bad ``config``, ``params``, ``n_copies``, or ``n_particles_total < N − 1``.
+    """
+
+    def __init__(
+        self, config: ScenarioConfig, params: TrackerParams | None = None, *, n_copies: int
+    ) -> None:
+        if isinstance(n_copies, bool) or not isinstance(n_copies, int | np.integer):
+            raise ValueError(f"n_copies must be an int >= 1, got {n_copies!r}")
+        if n_copies < 1:
+            raise ValueError(f"n_copies must be an int >= 1, got {n_copies}")
+        # validates config / params and gives the layout of one copy
+        one = TrackerBank(config, params, rngs=None, seed=0)
+        self.config = config
+        self.params = one.params
+        self.n_copies = int(n_copies)
+        self.n_agents = config.n_agents
+        N, B = self.n_agents, self.n_copies
+        self._R = B * N
+        self._M = one._M
+        self._P = one._P
+        self._obs_size = one._obs_size
+        self.agent_indices = np.tile(np.arange(N, dtype=np.int64), B)
+        self.copy_index = np.repeat(np.arange(B, dtype=np.int64), N)
+        per = max(1, CHUNK_PARTICLES // self._P)
+        self._bounds = [(s, min(s + per, self._R)) for s in range(0, self._R, per)]
+        self._cores: list[_BankCore] = []
+        self._initialised = False
+
+    # ------------------------------------------------------------------ helpers
+    def _copy_rngs(self, seed: int | None) -> list[np.random.Generator]:
+        return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(self.n_agents)]
+
+    def _seeds(self, seeds: Any, n: int) -> list[int | None]:
+        if seeds is None:
+            return [None] * n
+        out = list(seeds)
+        if len(out) != n:
+            raise ValueError(f"seeds must hold {n} seeds (one per copy), got {len(out)}")
+        for s in out:
+            if s is not None and (isinstance(s, bool) or not isinstance(s, int | np.integer)):
+                raise ValueError(f"seeds must be ints or None, got {s!r}")
+        return out
+
+    def _array(self, x: Any, name: str, tail: tuple[int, ...]) -> np.ndarray:
+        B, N = self.n_copies, self.n_agents
+        try:
+            arr = np.asarray(x, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be a numeric array, got {type(x).__name__}") from None
+        if arr.shape == (B * N,) + tail:
+            arr = arr.reshape((B, N) + tail)
+        if arr.shape != (B, N) + tail:
+            raise ValueError(f"{name} must have shape {(B, N) + tail}, got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} must be finite, got NaN or inf")
+        return arr.reshape((B * N,) + tail)
+
+    def _init(self, initial_poses_world: Any) -> np.ndarray | None:
+        mode = self.params.init_mode
+        known = initial_poses_world is not None if mode == "auto" else mode == "known"
+        if not known:
+            return None
+        if initial_poses_world is None:
+            raise ValueError("initial_poses_world is required when init_mode='known'")
+        B, N = self.n_copies, self.n_agents
+        init = np.asarray(initial_poses_world, dtype=np.float64)
+        if init.shape != (B, N, 3):
+            raise ValueError(
+                f"initial_poses_world must have shape (n_copies, n_agents, 3) = ({B}, {N}, 3), "
+                f"got {init.shape}"
+            )
+        if not np.all(np.isfinite(init)):
+            raise ValueError("initial_poses_world must be finite, got NaN or inf")
+        return init
+
+    # ------------------------------------------------------------------ reset / step
+    def reset(self, obs: Any, initial_poses_world: Any = None, seeds: Any = None) -> None:
+        """Start every copy: obs ``(B, N, obs_size)``, ``initial_poses_world (B, N, 3)`` or
+        None, ``seeds`` one per copy (None: fresh entropy for every copy)."""
+        obs_arr = self._array(obs, "obs", (self._obs_size,))
+        init = self._init(initial_poses_world)
+        rngs: list[np.random.Generator] = []
+        for s in self._seeds(seeds, self.n_copies):
+            rngs += self._copy_rngs(s)
+        self._cores = [
+            _BankCore(
+                self.config, self.params, self.agent_indices[s:e], rngs[s:e], self.copy_index[s:e]
+            )
+            for s, e in self._bounds
+        ]
+        for core, (s, e) in zip(self._cores, self._bounds, strict=True):
+            core.reset(obs_arr[s:e], init)
+        self._initialised = True
+
+    def reset_copies(
+        self, copies: Any, obs: Any, initial_poses_world: Any = None, seeds: Any = None
+    ) -> None:
+        """Restart the copies ``copies`` (indices, or a ``(B,)`` bool mask) from their rows of
+        ``obs (B, N, obs_size)`` (and of ``initial_poses_world (B, N, 3)``), with one seed
+        per restarted copy; every other copy keeps all its numbers."""
+        if not self._initialised:
+            raise ValueError("reset_copies() called before reset()")
+        c = np.asarray(copies)
+        if c.dtype == bool:
+            if c.shape != (self.n_copies,):
+                raise ValueError(f"copies mask must have shape ({self.n_copies},), got {c.shape}")
+            c = np.flatnonzero(c)
+        c = c.astype(np.int64).reshape(-1)
+        if np.any((c < 0) | (c >= self.n_copies)) or np.unique(c).size != c.size:
+            raise ValueError(f"copies must be distinct indices in [0, {self.n_copies - 1}]")
+        if c.size == 0:
+            return
+        seeds_l = self._seeds(seeds, c.size)
+        obs_arr = self._array(obs, "obs", (self._obs_size,))
+        init = self._init(initial_poses_world)
+        new_rng: dict[int, np.random.Generator] = {}
+        for k, s in zip(c.tolist(), seeds_l, strict=True):
+            for i, g in enumerate(self._copy_rngs(s)):
+                new_rng[k * self.n_agents + i] = g
+        for core, (s, e) in zip(self._cores, self._bounds, strict=True):
+            rows = np.flatnonzero(np.isin(self.copy_index[s:e], c))
+            if rows.size == 0:
+                continue
+            g_rows = s + rows
+            tmp = _BankCore(
+                self.config,
+                self.params,
+                self.agent_indices[g_rows],
+                [new_rng[int(r)] for r in g_rows],
+                self.copy_index[g_rows],
+            )
+            tmp.reset(obs_arr[g_rows], init)
+            core.splice(rows, tmp)
+
+    def step(self, actions: Any, obs: Any) -> None:
+        """One filter step of every robot of every copy: ``actions (B, N, 3)`` applied
+        (normalised), ``obs (B, N, obs_size)`` they produced (see :meth:`TrackerBank.step`)."""
+        if not self._initialised:
+            raise ValueError("step() called before reset()")
+        act = self._array(actions, "actions", (3,))
+        obs_arr = self._array(obs, "obs", (self._obs_size,))
+        for core, (s, e) in zip(self._cores, self._bounds, strict=True):
+            core.step(act[s:e], obs_arr[s:e])
+
+    # ------------------------------------------------------------------ outputs
+    @property
+    def initialised(self) -> bool:
+        return self._initialised
+
+    @property
+    def time_s(self) -> np.ndarray:
+        """``(B,)`` simulated seconds since each copy's last reset."""
+        self._check()
+        t = np.concatenate([c._time for c in self._cores])
+        return t.reshape(self.n_copies, self.n_agents)[:, 0].copy()
+
+    def _check(self) -> None:
+        if not self._initialised:
+            raise ValueError("the tracker has no estimate yet: call reset(obs) first")
+
+    def estimate(self) -> BankEstimate:
+        """The estimates of all ``B N`` rows (row ``k N + i``: robot i of copy k), as a
+        :class:`BankEstimate` (``time_s``: copy 0's; per copy: :attr:`time_s`)."""
+        self._check()
+        parts = [c.estimate_arrays() for c in self._cores]
+        arrays = {k: _ro(np.concatenate([p[k] for p in parts])) for k in parts[0] if k != "time_s"}
+        return BankEstimate(
+            agent_indices=_ro(self.agent_indices),
+            confidence=float(self.params.confidence),
+            time_s=float(parts[0]["time_s"][0]),
+            **arrays,
+        )
+
+    def particles_all(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(p_body (B N, P_T, 2) m, owner (B N, P_T) neighbour ID)`` of every row, sorted
+        by owner within a row (new arrays)."""
+        self._check()
+        parts = [c.particles_all() for c in self._cores]
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+    def particles_body(self, row: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(p_body (P_T, 2), owner (P_T,))`` of row ``row`` (see :meth:`TrackerBank.particles_body`)."""
+        self._check()
+        if isinstance(row, bool) or not isinstance(row, int | np.integer) or not 0 <= row < self._R:
+            raise ValueError(f"row must be an int in [0, {self._R - 1}], got {row!r}")
+        for core, (s, e) in zip(self._cores, self._bounds, strict=True):
+            if s <= row < e:
+                return core.particles_body(int(row) - s)
+        raise AssertionError("unreachable")  # pragma: no cover

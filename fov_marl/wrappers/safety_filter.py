@@ -110,6 +110,9 @@ class SafetyFilterWrapper(BaseParallelWrapper):
             overrides on top of the filter's defaults
             (:data:`FILTER_TRACKER_DEFAULTS`, :data:`FILTER_CONTROLLER_DEFAULTS`).
         draw_robot: robot whose beliefs :meth:`draw` shows, or None for none.
+        controller: ``"auto"`` (one :class:`~fov_marl.control.FovCbfController` per robot for
+            one team: as fast, and bit for bit the numbers of before), ``"batched"`` or
+            ``"loop"`` (:class:`~fov_marl.pipeline.PfCbfPipeline`); same actions within 1e-6.
     """
 
     def __init__(
@@ -120,6 +123,7 @@ class SafetyFilterWrapper(BaseParallelWrapper):
         tracker_params: TrackerParams | dict | None = None,
         controller_params: ControllerParams | dict | None = None,
         draw_robot: int | None = 0,
+        controller: str = "auto",
     ) -> None:
         super().__init__(env)
         base = env.unwrapped
@@ -143,6 +147,7 @@ class SafetyFilterWrapper(BaseParallelWrapper):
             tracker_params=tracker_params,
             controller_params=controller_params,
             init=init,  # type: ignore[arg-type]
+            controller=controller,  # type: ignore[arg-type]
         )
         self.draw_robot = draw_robot
         self._seed_rng = np.random.default_rng()

@@ -1,0 +1,242 @@
+"""BatchedFovCbfController gives what R FovCbfController.solve calls give."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fov_marl.config import make_config
+from fov_marl.control import ControllerParams, FovCbfController
+from fov_marl.control.batched import BatchedFovCbfController
+from fov_marl.control.safety import team_safety_rows
+
+
+def _instances(rng, R, M, spread=8.0):
+    p = rng.uniform(-spread, spread, (R, M, 2))
+    r = np.hypot(p[..., 0], p[..., 1])
+    p[r < 0.5] *= 2.0
+    v = rng.uniform(-0.7, 0.7, (R, M, 2))
+    d = np.maximum(0.0, np.hypot(p[..., 0], p[..., 1]) - rng.uniform(0.3, 6.0, (R, M)))
+    u = np.column_stack([rng.uniform(-1, 1, (R, 2)), rng.uniform(-1.5, 1.5, R)])
+    ids = np.argsort(rng.random((R, M)), axis=1)
+    det = rng.random((R, M)) < 0.5
+    return u, p, v, d, ids, det
+
+
+def _rows(cfg, params, p, det, rng, with_pose=True, blind=True):
+    R, M = p.shape[:2]
+    L = rng.normal(size=(R, M, 2, 2)) * 0.6
+    cov = L @ np.swapaxes(L, -1, -2)
+    pose = np.column_stack(
+        [rng.uniform(0.5, cfg.arena_size_m - 0.5, (R, 2)), rng.uniform(-3, 3, R)]
+    )
+    parts = rng.uniform(-6, 6, (R, 40, 2))
+    mass = np.where(rng.random((R, 40)) < 0.5, 0.05, 0.0)
+    return team_safety_rows(
+        cfg,
+        params,
+        mean_body=p,
+        cov_body=cov,
+        detected=det,
+        velocity_est_body=rng.uniform(-0.5, 0.5, (R, M, 2)),
+        pose_world=pose if with_pose else None,
+        particles_body=parts if blind else None,
+        particle_mass=mass if blind else None,
+    )
+
+
+def assert_same(cfg, params, u, p, v, d, ids, safety, det):
+    """Batched result == per-robot results (1e-6, identical statuses and flags)."""
+    R = u.shape[0]
+    batched = BatchedFovCbfController(cfg, params)
+    rb = batched.solve(u, p, v, d, ids, safety=safety, detected=det)
+    ctrls = [FovCbfController(cfg, params) for _ in range(R)]
+    statuses = []
+    for i in range(R):
+        s = ctrls[i].solve(
+            u[i], p[i], v[i], d[i], None if ids is None else ids[i],
+            safety=None if safety is None else safety.robot(i),
+            detected=None if det is None else det[i],
+        )  # fmt: skip
+        r = rb.robot(i)
+        ctx = f"robot {i}: {s.status} vs {r.status}"
+        np.testing.assert_allclose(r.u, s.u, atol=1e-6, err_msg=ctx)
+        assert r.status == s.status, ctx
+        assert r.fallback == s.fallback and r.intervened == s.intervened, ctx
+        np.testing.assert_allclose(r.kappa, s.kappa, atol=1e-6, err_msg=ctx)
+        np.testing.assert_array_equal(r.active, s.active)
+        np.testing.assert_array_equal(r.level, s.level)
+        assert (r.n_levels, r.n_qp, r.qp_status) == (s.n_levels, s.n_qp, s.qp_status), ctx
+        assert abs(r.safety_violation - s.safety_violation) <= 1e-6
+        assert abs(r.cone_violation - s.cone_violation) <= 1e-6
+        statuses.append(s.status)
+    for k in batched.stats:
+        assert batched.stats[k] == sum(c.stats[k] for c in ctrls), k
+    return statuses
+
+
+PARAMS = {
+    "default": {},
+    "filter": {"deadlock_turn_deg": 0.0},
+    "cone": {"motion_cone": True},
+    "paper_levels": {"safety_first": False, "motion_cone": True},
+    "hard": {"safety_hard": True},
+    "mean": {"safety_model": "mean"},
+    "omega_weight": {"omega_weight": 2.0, "max_levels": 2},
+    "no_prune": {"prune": False, "fov_translation": "seen"},
+    "paper_rows": {"fov_recovery_cap": 0.0, "fov_translation": "all"},
+}
+
+
+@pytest.mark.parametrize("name", sorted(PARAMS))
+@pytest.mark.parametrize("fov", [120.0, 220.0])
+def test_batched_equals_loop_random(name, fov):
+    cfg = make_config(fov_deg=fov)
+    params = ControllerParams(**PARAMS[name])
+    rng = np.random.default_rng(hash((name, fov)) % 2**32)
+    u, p, v, d, ids, det = _instances(rng, 40, 5)
+    rows = _rows(cfg, params, p, det, rng)
+    st1 = assert_same(cfg, params, u, p, v, d, ids, rows, det)
+    # standalone use: collision rows from p_body as exact
+    st2 = assert_same(cfg, params, u, p, v, d, None, None, None)
+    assert len(set(st1 + st2)) >= 2
+
+
+@settings(max_examples=25)
+@given(seed=st.integers(0, 2**31 - 1), R=st.integers(1, 8), M=st.integers(0, 7))
+def test_batched_equals_loop_property(seed, R, M):
+    cfg = make_config()
+    params = ControllerParams()
+    rng = np.random.default_rng(seed)
+    u, p, v, d, ids, det = _instances(rng, R, M, spread=rng.uniform(2.0, 15.0))
+    rows = _rows(cfg, params, p, det, rng, with_pose=bool(rng.random() < 0.7))
+    assert_same(cfg, params, u, p, v, d, ids, rows, det)
+
+
+def test_invalid_inputs_and_no_neighbours():
+    cfg = make_config()
+    params = ControllerParams()
+    rng = np.random.default_rng(5)
+    u, p, v, d, ids, det = _instances(rng, 5, 3)
+    rows = _rows(cfg, params, p, det, rng)
+    u[0, 1] = np.nan
+    p[1, 2, 0] = np.inf
+    d[2, 0] = np.nan
+    st_ = assert_same(cfg, params, u, p, v, d, ids, rows, det)
+    assert st_[:3] == ["invalid_input"] * 3
+    # M = 0 with wall rows only (a lone robot next to a wall)
+    u0 = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    rows0 = team_safety_rows(
+        cfg,
+        params,
+        mean_body=np.zeros((2, 0, 2)),
+        cov_body=np.zeros((2, 0, 2, 2)),
+        detected=np.zeros((2, 0), dtype=bool),
+        pose_world=np.array([[cfg.arena_size_m - 0.6, 5.0, 0.0], [5.0, 5.0, 0.0]]),
+    )
+    z = np.zeros((2, 0, 2))
+    st0 = assert_same(cfg, params, u0, z, z, np.zeros((2, 0)), None, rows0, None)
+    assert st0[0] != "unconstrained" and st0[1] == "unconstrained"
+
+
+def test_deadlock_unblock_and_safety_fallback_paths():
+    """Head-on encounters ("keep right" used) and robots boxed in (safe fallback)."""
+    cfg = make_config()
+    params = ControllerParams()
+    ds = cfg.safety_distance_m
+    R = 24
+    ang = np.linspace(-0.2, 0.2, R)
+    p = np.zeros((R, 2, 2))
+    p[:, 0] = np.column_stack([(ds + 0.2) * np.cos(ang), (ds + 0.2) * np.sin(ang)])
+    p[:, 1] = [[-30.0, 30.0]] * R
+    p[R // 2 :, 1] = np.column_stack([-(ds - 0.5) * np.ones(R - R // 2), 0.3 * ang[R // 2 :]])
+    p[R // 2 :, 0] *= (ds - 0.4) / (ds + 0.2)
+    v = np.zeros((R, 2, 2))
+    d = np.hypot(p[..., 0], p[..., 1]) - 0.2
+    u = np.tile([1.0, 0.0, 0.0], (R, 1))
+    det = np.ones((R, 2), dtype=bool)
+    rows = team_safety_rows(
+        cfg, params, mean_body=p, cov_body=np.zeros((R, 2, 2, 2)), detected=det,
+        velocity_est_body=v,
+    )  # fmt: skip
+    st_ = assert_same(cfg, params, u, p, v, d, None, rows, det)
+    assert "safety_fallback" in st_
+    # unblock changed something: compare with the deadlock steering off
+    off = ControllerParams(deadlock_turn_deg=0.0)
+    r_on = BatchedFovCbfController(cfg, params).solve(u, p, v, d, safety=rows, detected=det)
+    r_off = BatchedFovCbfController(cfg, off).solve(u, p, v, d, safety=rows, detected=det)
+    turned = np.abs(r_on.u - r_off.u).max(axis=1) > 1e-3
+    assert turned.any()
+    assert np.all(r_on.u[turned, 1] < r_off.u[turned, 1] + 1e-9)  # to the right
+
+
+def test_osqp_backend_loops_per_robot():
+    cfg = make_config()
+    params = ControllerParams(qp_backend="osqp")
+    rng = np.random.default_rng(7)
+    u, p, v, d, ids, det = _instances(rng, 4, 3)
+    rows = _rows(cfg, params, p, det, rng)
+    assert_same(cfg, params, u, p, v, d, ids, rows, det)
+
+
+def test_shape_errors():
+    ctrl = BatchedFovCbfController(make_config())
+    z = np.zeros((2, 3, 2))
+    with pytest.raises(ValueError, match="u_star"):
+        ctrl.solve(np.zeros(3), z, z, np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="v_est_body"):
+        ctrl.solve(np.zeros((2, 3)), z, z[:, :2], np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="d must"):
+        ctrl.solve(np.zeros((2, 3)), z, z, np.zeros(3))
+    with pytest.raises(ValueError, match="ids"):
+        ctrl.solve(np.zeros((2, 3)), z, z, np.zeros((2, 3)), ids=np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="safety rows"):
+        ctrl.solve(np.zeros((2, 3)), z, z, np.zeros((2, 3)), safety=(z, z, z))
+    assert math.isfinite(ctrl.stats["steps"])
+
+
+@pytest.mark.parametrize("scenario", ["coverage", "crossing"])
+def test_batched_equals_loop_on_recorded_pfcbf_episode(scenario):
+    """The rows a pfcbf team builds over an episode (estimates, collision rows, u*)."""
+    from fov_marl.baselines import make_policy
+    from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
+
+    mod = fov_coverage_v0 if scenario == "coverage" else fov_crossing_v0
+    env = mod.parallel_env(n_agents=8)
+    obs, _ = env.reset(seed=11)
+    pol = make_policy("pfcbf", env)
+    pol.reset(seed=11)
+    pl = pol.pipeline
+    seen = []
+    for t in range(20):
+        if t == 0:
+            pl.reset(obs, seed=11, initial_poses_world=env.unwrapped.poses)
+        else:
+            pl.observe(obs)
+        u = pl.desired_inputs()
+        e = pl.estimates_view()
+        rows = pl.safety_rows()
+        args = (e["mean_body"], e["velocity_est_body"], e["ellipse_distance"], e["ids"])
+        seen += assert_same(pl.config, pl.controller_params, u, *args, rows, e["detected"])
+        act = pl.filter(u)
+        obs, *_ = env.step({a: act[i] for i, a in enumerate(env.agents)})
+    assert {"unconstrained", "solved"} <= set(seen)
+
+
+def test_bench_batched_filter_reports_both_variants():
+    from fov_marl.control.benchmark import bench_batched_filter
+
+    rows = bench_batched_filter(n_copies=(2,), n_agents=3, steps=2, warmup=1)
+    (r,) = rows
+    assert r["robots"] == 6 and r["robot_steps"] == 12
+    assert r["batched_ms"] > 0 and r["looped_ms"] > 0 and r["speedup"] > 0
+    assert r["max_action_diff"] <= 1e-6
+    assert set(r["batched_stage_ms"]) == {"tracker", "safety_rows", "qp", "lloyd"}
+    (p,) = bench_batched_filter(n_copies=(2,), n_agents=3, steps=1, warmup=0, policy="pfcbf")
+    assert p["max_action_diff"] <= 1e-6 and p["batched_stage_ms"]["lloyd"] > 0
+    with pytest.raises(ValueError, match="policy"):
+        bench_batched_filter(policy="nope")

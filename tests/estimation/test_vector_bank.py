@@ -1,0 +1,129 @@
+"""VectorTrackerBank: B env copies in one set of arrays, bit-identical to B TrackerBanks."""
+
+from __future__ import annotations
+
+from dataclasses import fields
+
+import numpy as np
+import pytest
+
+from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
+from fov_marl.estimation import BankEstimate, TrackerBank, TrackerParams, VectorTrackerBank
+
+
+def _obs(env, obs):
+    return np.stack([np.asarray(obs[a], dtype=np.float32) for a in env.possible_agents])
+
+
+def _assert_bank_equal(vec: VectorTrackerBank, banks: list[TrackerBank]) -> None:
+    ev = vec.estimate()
+    N = vec.n_agents
+    for k, bank in enumerate(banks):
+        eb = bank.estimate()
+        for f in fields(BankEstimate):
+            a, b = getattr(ev, f.name), getattr(eb, f.name)
+            if isinstance(b, np.ndarray):
+                np.testing.assert_array_equal(a[k * N : (k + 1) * N], b, err_msg=f.name)
+        pv, ov = vec.particles_all()
+        for i in range(N):
+            pb, ob = bank.particles_body(i)
+            np.testing.assert_array_equal(pv[k * N + i], pb)
+            np.testing.assert_array_equal(ov[k * N + i], ob)
+            p1, o1 = vec.particles_body(k * N + i)
+            np.testing.assert_array_equal(p1, pb)
+            np.testing.assert_array_equal(o1, ob)
+        assert vec.time_s[k] == eb.time_s
+
+
+@pytest.mark.parametrize(
+    "scenario,model,known",
+    [("coverage", "mixture", True), ("crossing", "crossing", True), ("coverage", "static", False)],
+)
+def test_vector_bank_equals_separate_banks_bit_for_bit(scenario, model, known):
+    mod = fov_coverage_v0 if scenario == "coverage" else fov_crossing_v0
+    B, N, seed = 3, 5, 40
+    envs = [mod.parallel_env(n_agents=N) for _ in range(B)]
+    cfg = envs[0].unwrapped.config
+    params = TrackerParams(motion_model=model, n_particles_total=300)
+    obs = [e.reset(seed=seed + k)[0] for k, e in enumerate(envs)]
+    poses = np.stack([e.unwrapped.poses for e in envs])
+    vec = VectorTrackerBank(cfg, params, n_copies=B)
+    vec.reset(
+        np.stack([_obs(e, o) for e, o in zip(envs, obs, strict=True)]),
+        initial_poses_world=poses if known else None,
+        seeds=[seed + k for k in range(B)],
+    )
+    banks = []
+    for k, e in enumerate(envs):
+        bk = TrackerBank(cfg, params, seed=seed + k)
+        bk.reset(_obs(e, obs[k]), initial_poses_world=poses[k] if known else None)
+        banks.append(bk)
+    _assert_bank_equal(vec, banks)
+    rng = np.random.default_rng(0)
+    for t in range(12):
+        act = rng.uniform(-1, 1, (B, N, 3)).astype(np.float32)
+        obs = [
+            e.step({a: act[k, i] for i, a in enumerate(e.possible_agents)})[0]
+            for k, e in enumerate(envs)
+        ]
+        o = np.stack([_obs(e, ob) for e, ob in zip(envs, obs, strict=True)])
+        vec.step(act, o)
+        for k, bk in enumerate(banks):
+            bk.step(act[k], o[k])
+        if t == 6:  # copy 1 starts a new episode with a new seed; copy 0 and 2 go on
+            obs[1] = envs[1].reset(seed=99)[0]
+            o[1] = _obs(envs[1], obs[1])
+            poses[1] = envs[1].unwrapped.poses
+            vec.reset_copies([1], o, initial_poses_world=poses if known else None, seeds=[99])
+            banks[1] = TrackerBank(cfg, params, seed=99)
+            banks[1].reset(o[1], initial_poses_world=poses[1] if known else None)
+        _assert_bank_equal(vec, banks)
+    assert vec.time_s[1] < vec.time_s[0]
+
+
+def test_vector_bank_chunks_do_not_change_numbers(monkeypatch):
+    """Rows split over several computation chunks (one chunk per 2 robots here)."""
+    import fov_marl.estimation.tracker as T
+
+    B, N = 2, 4
+    env = fov_coverage_v0.parallel_env(n_agents=N)
+    cfg = env.unwrapped.config
+    params = TrackerParams(n_particles_total=200)
+    obs = [fov_coverage_v0.parallel_env(n_agents=N).reset(seed=s)[0] for s in (1, 2)]
+    o = np.stack([_obs(env, x) for x in obs])
+    a = VectorTrackerBank(cfg, params, n_copies=B)
+    a.reset(o, seeds=[1, 2])
+    monkeypatch.setattr(T, "CHUNK_PARTICLES", 400)
+    b = VectorTrackerBank(cfg, params, n_copies=B)
+    assert len(b._bounds) == 4
+    b.reset(o, seeds=[1, 2])
+    b.reset_copies(np.array([False, True]), o, seeds=[2])
+    act = np.zeros((B, N, 3))
+    a.step(act, o)
+    b.step(act, o)
+    np.testing.assert_array_equal(a.estimate().mean_body, b.estimate().mean_body)
+    np.testing.assert_array_equal(a.particles_all()[0], b.particles_all()[0])
+
+
+def test_vector_bank_input_errors():
+    env = fov_coverage_v0.parallel_env(n_agents=3)
+    cfg = env.unwrapped.config
+    with pytest.raises(ValueError, match="n_copies"):
+        VectorTrackerBank(cfg, n_copies=0)
+    vec = VectorTrackerBank(cfg, n_copies=2)
+    D = vec._obs_size
+    with pytest.raises(ValueError, match="before reset"):
+        vec.step(np.zeros((2, 3, 3)), np.zeros((2, 3, D)))
+    with pytest.raises(ValueError, match="obs must have shape"):
+        vec.reset(np.zeros((2, 3, D + 1)))
+    with pytest.raises(ValueError, match="seeds must hold 2"):
+        vec.reset(np.zeros((2, 3, D)), seeds=[1])
+    with pytest.raises(ValueError, match="initial_poses_world"):
+        vec.reset(np.zeros((2, 3, D)), initial_poses_world=np.zeros((3, 3)))
+    vec.reset(np.zeros((2, 3, D)), seeds=[0, 1])
+    with pytest.raises(ValueError, match="actions must be finite"):
+        vec.step(np.full((2, 3, 3), np.nan), np.zeros((2, 3, D)))
+    with pytest.raises(ValueError, match="copies must be distinct"):
+        vec.reset_copies([2], np.zeros((2, 3, D)))
+    with pytest.raises(ValueError, match="row must be"):
+        vec.particles_body(6)
