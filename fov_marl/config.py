@@ -440,7 +440,11 @@ class ScenarioConfig:
                     f"apart; must be >= 2 * robot_radius_m = {2 * r} m"
                 )
         arr = arr.copy()
-        arr[:, 2] = np.arctan2(np.sin(arr[:, 2]), np.cos(arr[:, 2]))
+        yaw = arr[:, 2]
+        # wrap to (-pi, pi], leaving yaws already there untouched (so that
+        # from_dict(to_dict()) is exact: arctan2(sin, cos) moves some by one ulp)
+        inside = (yaw > -np.pi) & (yaw <= np.pi)
+        arr[:, 2] = np.where(inside, yaw, np.arctan2(np.sin(yaw), np.cos(yaw)))
         arr.setflags(write=False)
         return arr
 
