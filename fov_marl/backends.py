@@ -186,7 +186,7 @@ def _map_ray(
                     res = ray.get(r)
                 except ray.exceptions.RayTaskError as exc:
                     if _raised_by_fov_marl_check(exc):  # a job's own argument check
-                        raise ValueError(_last_line(str(exc.cause))) from None
+                        raise ValueError(_last_line(_message(exc.cause))) from None
                     raise
                 done(refs[r], res)
     finally:
@@ -202,9 +202,15 @@ def _raised_by_fov_marl_check(exc: Any) -> bool:
     cause = getattr(exc, "cause", None)
     if not isinstance(cause, ValueError):
         return False
-    files = re.findall(r'File "([^"]+)"', str(getattr(exc, "traceback_str", "")))
+    files = re.findall(r'File "([^"]+)"', str(exc))  # str: Ray's remote traceback
     pkg = os.path.join(_PACKAGE_PARENT, "fov_marl") + os.sep
     return bool(files) and os.path.abspath(files[-1]).startswith(pkg)
+
+
+def _message(cause: BaseException) -> str:
+    """The exception's own message (``args[0]``), not Ray's traceback-laden ``str``."""
+    args = getattr(cause, "args", ())
+    return str(args[0]) if args else str(cause)
 
 
 def _last_line(text: str) -> str:
