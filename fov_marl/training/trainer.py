@@ -831,8 +831,16 @@ class LearnedPolicy:
     ``[-1, 1]``.
 
     Attributes:
-        algo, scenario, env_kwargs, safety_filter, belief, belief_kwargs,
-        safety_filter_kwargs, n_agents, config (the whole ``config.json``), model.
+        algo: ``"ppo"`` or ``"sac"``.
+        scenario: the scenario it was trained on.
+        env_kwargs: the evaluation config fields (``config.json``'s ``env_kwargs``).
+        safety_filter: trained behind :class:`~fov_marl.wrappers.SafetyFilterWrapper`.
+        safety_filter_kwargs: the wrapper's keywords.
+        belief: uses belief features (computed by the policy itself).
+        belief_kwargs: the belief wrapper's keywords.
+        n_agents: the team size (the observation size depends on it).
+        config: the whole ``config.json``.
+        model: the stable-baselines3 model.
     """
 
     def __init__(self, model: BaseAlgorithm, config: dict[str, Any], obs_norm: Any | None):
