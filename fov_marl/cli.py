@@ -1,6 +1,19 @@
-"""The ``fov-marl`` command line: evaluate, reproduce, render, bench, train.
+"""The ``fov-marl`` command line: evaluate, reproduce, render, bench, train, stress.
 
-Run ``fov-marl COMMAND --help`` for each command's options, defaults and units.
+Run ``fov-marl COMMAND --help`` for each command's options, defaults and units;
+``fov-marl --version`` prints the version.
+
+Scenario config. Every command that builds an env takes ``--config FILE.json`` (a JSON
+object of :class:`~fov_marl.config.ScenarioConfig` fields, e.g. ``to_dict()`` saved with
+``json.dump``) and ``--env FIELD=VALUE`` (repeatable); precedence, lowest first: the
+scenario defaults, a trained model's ``config.json``, ``--config``, ``--env``, the
+dedicated flags (``--n-agents``, ``--fov-deg``, ``--max-cycles``). ``evaluate`` and
+``render`` take a trained model as ``--policy`` (a ``.zip`` or a run folder); evaluating
+it on another scenario or team size than it was trained on is an error.
+
+Backends. ``evaluate``, ``reproduce`` and ``stress`` take ``--backend {local,ray}`` and
+``--ray-address ADDR`` (:mod:`fov_marl.backends`): the same numbers for the same seeds.
+Progress bars (tqdm, else rich, else none) count simulated steps.
 
 Errors. A user mistake (a bad flag value, an unreadable or foreign model file, an
 output path that cannot be written) prints one line on stderr naming the flag or file
@@ -10,7 +23,8 @@ checked up front (``--out`` paths, ``--policy`` files, the scenario config,
 or ``OSError``, or one raised inside a third-party library rather than by
 fov_marl's own checks) still show their traceback, so real bugs are not hidden;
 ``--debug`` (anywhere on the command line, or ``FOV_MARL_DEBUG=1``) shows the
-traceback for user mistakes too. Ctrl-C exits with status 130 without a traceback.
+traceback for user mistakes too. Ctrl-C exits with status 130 without a traceback
+(``train`` first saves the model trained so far and says where).
 """
 
 from __future__ import annotations
