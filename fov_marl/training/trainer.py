@@ -581,6 +581,16 @@ def effective_timesteps(
     return -(-int(timesteps) // block) * block
 
 
+def _have_progress_bar() -> bool:
+    """SB3's progress bar needs both tqdm and rich; without either, train without one."""
+    try:
+        import rich  # noqa: F401
+        import tqdm  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def _jsonable(x: Any) -> Any:
     if isinstance(x, dict):
         return {str(k): _jsonable(v) for k, v in x.items()}
@@ -653,7 +663,8 @@ def train(
             the env's own horizon (default 1000 steps).
         normalize: wrap in ``VecNormalize`` (observations and rewards).
         checkpoint_every: save a checkpoint every this many timesteps (0: never).
-        progress_bar: show SB3's tqdm/rich progress bar.
+        progress_bar: show SB3's tqdm/rich progress bar (per timestep); silently none
+            when tqdm or rich is not installed.
         torch_threads: ``torch.set_num_threads`` during training (restored after), in
             [1, 1024].
         safety_filter_kwargs: keywords of ``SafetyFilterWrapper``.
@@ -681,7 +692,7 @@ def train(
     safety_filter = check_bool("safety_filter", safety_filter)
     belief = check_bool("belief", belief)
     normalize = check_bool("normalize", normalize)
-    progress_bar = check_bool("progress_bar", progress_bar)
+    progress_bar = check_bool("progress_bar", progress_bar) and _have_progress_bar()
     if train_max_cycles is not None:
         train_max_cycles = check_int("train_max_cycles", train_max_cycles, 1, note="(or None)")
     out = check_out_dir("out_dir", out_dir)

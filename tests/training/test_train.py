@@ -399,3 +399,24 @@ def test_train_config_file_and_env(tmp_path, capsys):
     assert main([*argv, "--scenario", "coverage", "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
     assert "--scenario coverage conflicts with --config" in err and len(err.splitlines()) == 1
+
+
+def test_no_progress_bar_without_tqdm_or_rich(tmp_path, monkeypatch):
+    import sys
+
+    from stable_baselines3 import PPO
+
+    seen = []
+    real = PPO.learn
+
+    def learn(self, *args, **kwargs):
+        seen.append(kwargs["progress_bar"])
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(PPO, "learn", learn)
+    small = dict(timesteps=64, n_envs=1, env_kwargs={"n_agents": 2}, checkpoint_every=0,
+                 hyperparams={"n_steps": 32, "batch_size": 32}, progress_bar=True)  # fmt: skip
+    assert _train(tmp_path / "a", **small).exists()
+    monkeypatch.setitem(sys.modules, "rich", None)  # import rich -> ImportError
+    assert _train(tmp_path / "b", **small).exists()
+    assert seen == [True, False]
