@@ -4,15 +4,17 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 PIP_FLAGS := --disable-pip-version-check -q
+# every extra the test suite exercises (ray backend, mp4, docs build, TorchRL/BenchMARL/RLlib)
+TEST_EXTRAS := dev,train,ray,video,docs,torchrl,benchmarl,rllib
 
-.PHONY: demo test test-all lint format bench clean
+.PHONY: demo test test-all lint format bench docs clean
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
 
 $(STAMP): $(BIN)/python pyproject.toml constraints.txt
 	$(BIN)/python -m pip install $(PIP_FLAGS) --upgrade pip
-	$(BIN)/python -m pip install $(PIP_FLAGS) -c constraints.txt -e ".[dev,train]"
+	$(BIN)/python -m pip install $(PIP_FLAGS) -c constraints.txt -e ".[$(TEST_EXTRAS)]"
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -33,5 +35,9 @@ format: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/fov-marl bench
 
+# the API reference is built from the docstrings (mkdocstrings); warnings are errors
+docs: $(STAMP)
+	$(BIN)/python -m mkdocs build --strict --site-dir site
+
 clean:
-	rm -rf $(VENV) demo_out .pytest_cache
+	rm -rf $(VENV) demo_out .pytest_cache site

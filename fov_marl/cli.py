@@ -1,6 +1,19 @@
-"""The ``fov-marl`` command line: evaluate, reproduce, render, bench, train.
+"""The ``fov-marl`` command line: evaluate, reproduce, render, bench, train, stress.
 
-Run ``fov-marl COMMAND --help`` for each command's options, defaults and units.
+Run ``fov-marl COMMAND --help`` for each command's options, defaults and units;
+``fov-marl --version`` prints the version.
+
+Scenario config. Every command that builds an env takes ``--config FILE.json`` (a JSON
+object of :class:`~fov_marl.config.ScenarioConfig` fields, e.g. ``to_dict()`` saved with
+``json.dump``) and ``--env FIELD=VALUE`` (repeatable); precedence, lowest first: the
+scenario defaults, a trained model's ``config.json``, ``--config``, ``--env``, the
+dedicated flags (``--n-agents``, ``--fov-deg``, ``--max-cycles``). ``evaluate`` and
+``render`` take a trained model as ``--policy`` (a ``.zip`` or a run folder); evaluating
+it on another scenario or team size than it was trained on is an error.
+
+Backends. ``evaluate``, ``reproduce`` and ``stress`` take ``--backend {local,ray}`` and
+``--ray-address ADDR`` (:mod:`fov_marl.backends`): the same numbers for the same seeds.
+Progress bars (tqdm, else rich, else none) count simulated steps.
 
 Errors. A user mistake (a bad flag value, an unreadable or foreign model file, an
 output path that cannot be written) prints one line on stderr naming the flag or file
@@ -10,7 +23,8 @@ checked up front (``--out`` paths, ``--policy`` files, the scenario config,
 or ``OSError``, or one raised inside a third-party library rather than by
 fov_marl's own checks) still show their traceback, so real bugs are not hidden;
 ``--debug`` (anywhere on the command line, or ``FOV_MARL_DEBUG=1``) shows the
-traceback for user mistakes too. Ctrl-C exits with status 130 without a traceback.
+traceback for user mistakes too. Ctrl-C exits with status 130 without a traceback
+(``train`` first saves the model trained so far and says where).
 """
 
 from __future__ import annotations
@@ -20,11 +34,11 @@ import json
 import math
 import os
 import sys
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from fov_marl.tables import format_table
 from fov_marl.validation import check_out_dir, check_out_file
 
 __all__ = ["main", "build_parser", "format_table", "CliError"]
@@ -92,26 +106,6 @@ def _float_in(flag: str, lo: float, hi: float, lo_open: bool = False):
     return conv
 
 
-def format_table(rows: Sequence[Sequence[Any]], headers: Sequence[str]) -> str:
-    """Plain-text table readable in a terminal and in a log."""
-
-    def fmt(v: Any) -> str:
-        if v is None:
-            return "-"
-        if isinstance(v, float):
-            return f"{v:.4g}" if abs(v) < 1e4 else f"{v:.3e}"
-        return str(v)
-
-    cells = [[fmt(v) for v in r] for r in rows]
-    widths = [
-        max(len(h), *(len(r[i]) for r in cells)) if cells else len(h) for i, h in enumerate(headers)
-    ]
-    line = "  ".join(h.rjust(w) for h, w in zip(headers, widths, strict=True))
-    sep = "  ".join("-" * w for w in widths)
-    body = ["  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
-    return "\n".join([line, sep, *body])
-
-
 # ----------------------------------------------------------------- evaluate
 EVAL_COLUMNS = (
     "seed",
@@ -146,47 +140,27 @@ _CONFIG_FLAGS = {"n_agents": "--n-agents", "fov_deg": "--fov-deg", "max_cycles":
 
 
 def _is_model(policy: str) -> bool:
-    return policy.endswith(".zip") or os.path.isdir(policy)
+    from fov_marl.evaluation import is_model_path
+
+    return is_model_path(policy)
 
 
-def _env_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    """Config keywords given on the command line; scenario/model defaults fill the rest."""
-    kw: dict[str, Any] = {}
-    for flag in _CONFIG_FLAGS:
-        if getattr(args, flag, None) is not None:
-            kw[flag] = getattr(args, flag)
-    if not _is_model(args.policy):
-        kw.setdefault("fov_deg", 120.0)
-    return kw
-
-
-def _check_policy(args: argparse.Namespace, *, models: bool = True) -> Any | None:
+def _check_policy(args: argparse.Namespace) -> Any | None:
     """``--policy``: a registered name (returns None) or a trained model (returns it
     loaded), checked before any episode runs."""
     policy = args.policy
     if _is_model(policy):
-        if not models:
-            raise CliError(
-                f"--policy {policy}: {args.command} takes a registered policy name; "
-                "trained models are not supported by this command"
-            )
         try:
             from fov_marl.training import load_policy  # torch only for learned policies
         except ImportError as exc:
             raise CliError(
                 f"--policy {policy}: loading a trained model needs the 'train' extra "
-                f"(pip install fov_marl[train]): {exc}"
+                f"(pip install 'fov_marl[train]'): {exc}"
             ) from None
         try:
             loaded = load_policy(policy)
         except ValueError as exc:
             raise CliError(f"--policy {_one_line(exc)}") from None
-        n = getattr(args, "n_agents", None)
-        if n is not None and n != loaded.n_agents:
-            raise CliError(
-                f"--n-agents {n}: the model {policy} was trained with n_agents = "
-                f"{loaded.n_agents} (its observation size depends on it)"
-            )
         return loaded
     from fov_marl.baselines import available_policies
 
@@ -199,81 +173,117 @@ def _check_policy(args: argparse.Namespace, *, models: bool = True) -> Any | Non
     return None
 
 
-def _check_config(args: argparse.Namespace, loaded: Any | None) -> dict[str, Any]:
-    """Validate the scenario config the flags (and a model's config.json) give."""
-    from fov_marl.config import ConfigError, make_config
+def _resolve_scenario(args: argparse.Namespace, loaded: Any | None, file_scenario: Any) -> str:
+    """``--scenario``, else the ``--config`` file's, else the model's, else coverage; a
+    trained model evaluated on another scenario than its own is an error."""
+    given = getattr(args, "scenario", None)
+    if file_scenario is not None and file_scenario not in ("coverage", "crossing"):
+        raise CliError(
+            f"--config {args.config}: scenario must be 'coverage' or 'crossing', "
+            f"got {file_scenario!r}"
+        )
+    if given is not None and file_scenario is not None and given != file_scenario:
+        raise CliError(
+            f"--scenario {given} conflicts with --config {args.config}, whose scenario is "
+            f"{file_scenario!r}; give one of them"
+        )
+    want = given or file_scenario
+    if loaded is not None and want is not None and want != loaded.scenario:
+        flag = f"--scenario {want}" if given else f"--config {args.config}"
+        raise CliError(
+            f"{flag}: the model {args.policy} was trained on the {loaded.scenario!r} "
+            f"scenario (its observations and rewards differ); evaluate it with "
+            f"--scenario {loaded.scenario}"
+        )
+    return want or (loaded.scenario if loaded is not None else "coverage")
 
-    kw = _env_kwargs(args)
+
+def _check_config(args: argparse.Namespace, loaded: Any | None) -> dict[str, Any]:
+    """Resolve and validate the scenario config before any episode runs.
+
+    Precedence, lowest first: the scenario's defaults, a model's ``config.json``,
+    ``--config FILE``, ``--env FIELD=VALUE``, the dedicated flags (``--n-agents``,
+    ``--fov-deg``, ``--max-cycles``). Sets ``args.scenario`` to the scenario used.
+
+    Returns:
+        The config keywords to pass on (a model's own fields excluded: the worker
+        loading it adds them).
+    """
+    from fov_marl.config import ConfigError, cli_overrides, make_config, source_of_error
+
+    try:
+        file_scenario, kw, sources = cli_overrides(
+            getattr(args, "config", None), getattr(args, "env", None)
+        )
+    except ConfigError as exc:
+        raise CliError(_one_line(exc)) from None
+    args.scenario = _resolve_scenario(args, loaded, file_scenario)
+    for field_name, flag in _CONFIG_FLAGS.items():
+        value = getattr(args, field_name, None)
+        if value is None:
+            continue
+        if sources.get(field_name) == "--env" and kw[field_name] != value:
+            raise CliError(
+                f"--env {field_name}={kw[field_name]!r} conflicts with {flag} {value}; give "
+                "one of them"
+            )
+        kw[field_name] = value
+        sources[field_name] = f"{flag} {value}"
+    if loaded is None:
+        kw.setdefault("fov_deg", 120.0)
     base = dict(loaded.env_kwargs) if loaded is not None else {}
     try:
-        make_config(scenario=args.scenario, **{**base, **kw})
+        cfg = make_config(scenario=args.scenario, **{**base, **kw})
     except ConfigError as exc:
-        given = [
-            f"{flag} {getattr(args, f)}"
-            for f, flag in _CONFIG_FLAGS.items()
-            if getattr(args, f, None) is not None
-        ]
-        if given:
-            raise CliError(f"{' '.join(given)}: {_one_line(exc)}") from None
+        src = source_of_error(str(exc), sources)
+        if src is None and len(sources) == 1:
+            src = next(iter(sources.values()))
+        if src is not None:
+            raise CliError(f"{src}: {_one_line(exc)}") from None
         if loaded is not None:
             raise CliError(f"--policy {args.policy}: its config.json: {_one_line(exc)}") from None
         raise CliError(_one_line(exc)) from None
+    if loaded is not None and cfg.n_agents != loaded.n_agents:
+        src = sources.get("n_agents", "--n-agents")
+        raise CliError(
+            f"{src}: the model {args.policy} was trained with n_agents = "
+            f"{loaded.n_agents} (its observation size depends on it)"
+        )
     return kw
 
 
-def _episode_job(job: dict[str, Any]) -> dict[str, Any]:
-    from fov_marl.evaluation import run_episode
+def _check_backend(args: argparse.Namespace) -> None:
+    from fov_marl.backends import check_backend
 
-    policy = job.pop("policy")
-    if _is_model(policy):
-        from fov_marl.training import load_policy  # torch only for learned policies
+    check_backend(args.backend, args.ray_address)
 
-        loaded = load_policy(policy)
-        job = {**loaded.env_kwargs, **job}
-        job["safety_filter"] = job.get("safety_filter") or loaded.safety_filter
-        rec = run_episode(policy=loaded.factory, **job)
-        rec.policy = str(policy)
-    else:
-        rec = run_episode(policy=policy, **job)
-    return rec.to_json()
+
+def _workers(args: argparse.Namespace) -> int:
+    """``--workers``, by default 1 locally and every CPU of a local Ray."""
+    if args.workers is not None:
+        return args.workers
+    return (os.cpu_count() or 1) if args.backend == "ray" else 1
 
 
 def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
-    from fov_marl.evaluation import EpisodeRecord, summarize
+    from fov_marl.evaluation import run_episodes, summarize
 
-    # every check before the first episode: output folder, policy, config
+    # every check before the first episode: output folder, backend, policy, config
     out_dir = check_out_dir("--out", args.out) if args.out is not None else None
+    _check_backend(args)
     loaded = _check_policy(args)
     env_kwargs = _check_config(args, loaded)
-    jobs = [
-        dict(
-            scenario=args.scenario,
-            policy=args.policy,
-            seed=args.seed + k,
-            safety_filter=args.safety_filter,
-            **env_kwargs,
-        )
-        for k in range(args.episodes)
-    ]
-    t0 = time.perf_counter()
-    results: list[dict[str, Any]] = []
-    if args.workers > 1 and len(jobs) > 1:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
-        # Forking a process that has started torch's threads (a model loaded for the
-        # checks above, or training in the same process) can deadlock the children.
-        ctx = multiprocessing.get_context("spawn") if "torch" in sys.modules else None
-        with ProcessPoolExecutor(max_workers=min(args.workers, len(jobs)), mp_context=ctx) as ex:
-            for k, res in enumerate(ex.map(_episode_job, jobs)):
-                results.append(res)
-                _progress(k + 1, len(jobs), t0, args.quiet)
-    else:
-        for k, job in enumerate(jobs):
-            results.append(_episode_job(dict(job)))
-            _progress(k + 1, len(jobs), t0, args.quiet)
-    fields = {f for f in EpisodeRecord.__dataclass_fields__}
-    records = [EpisodeRecord(**{k: v for k, v in r.items() if k in fields}) for r in results]
+    records = run_episodes(
+        args.scenario,
+        args.policy,
+        [args.seed + k for k in range(args.episodes)],
+        safety_filter=args.safety_filter,
+        backend=args.backend,
+        workers=_workers(args),
+        ray_address=args.ray_address,
+        progress=not args.quiet,
+        **env_kwargs,
+    )
     summary = summarize(records)
     out = {
         "episodes": [r.to_json(with_series=args.save_series) for r in records],
@@ -298,29 +308,22 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
-def _progress(k: int, n: int, t0: float, quiet: bool) -> None:
-    if quiet:
-        return
-    el = time.perf_counter() - t0
-    bar = "#" * int(20 * k / n)
-    sys.stderr.write(f"\r[{bar:<20}] {k}/{n} episodes, {el:.1f} s")
-    if k == n:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
-
-
 # ------------------------------------------------------------------- render
 RENDER_SUFFIXES = (".gif", ".mp4", ".png")
 
 
 def run_render(args: argparse.Namespace) -> Path:
     from fov_marl.config import make_config
-    from fov_marl.video import render_episode
+    from fov_marl.video import check_writer, parse_beliefs_of, render_episode
 
     out = check_out_file("--out", args.out, RENDER_SUFFIXES)
-    _check_policy(args, models=False)
-    env_kwargs = _check_config(args, None)
-    steps = make_config(scenario=args.scenario, **env_kwargs).max_cycles
+    check_writer(out)  # .mp4 needs imageio-ffmpeg: say so before simulating
+    loaded = _check_policy(args)
+    env_kwargs = _check_config(args, loaded)
+    base = dict(loaded.env_kwargs) if loaded is not None else {}
+    cfg = make_config(scenario=args.scenario, **{**base, **env_kwargs})
+    beliefs = parse_beliefs_of(args.beliefs_of, cfg.n_agents)
+    steps = cfg.max_cycles
     frames = -(-steps // args.every)
     if frames > MAX_RENDER_FRAMES:  # render_episode keeps them all, even for a .png
         raise CliError(
@@ -336,6 +339,8 @@ def run_render(args: argparse.Namespace) -> Path:
         safety_filter=args.safety_filter,
         every=args.every,
         fps=args.fps,
+        beliefs_of=beliefs,
+        legend=not args.no_legend,
         **env_kwargs,
     )
     print(f"wrote {path}")
@@ -366,15 +371,95 @@ def run_reproduce(args: argparse.Namespace) -> Path:
     from fov_marl.report import reproduce
 
     out = check_out_dir("--out", args.out)
-    path = reproduce(out, quick=args.quick, workers=args.workers, seeds=args.seeds)
+    _check_backend(args)
+    path = reproduce(
+        out,
+        quick=args.quick,
+        workers=_workers(args),
+        seeds=args.seeds,
+        backend=args.backend,
+        ray_address=args.ray_address,
+    )
     print(f"wrote {path}")
     return path
 
 
 # -------------------------------------------------------------------- parser
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows ``(default: X)`` once: only when the help text does not already say what
+    the default is, and never for flags (``store_true``) or ``None`` defaults."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if (
+            "default" in text.lower()
+            or action.default in (None, False, argparse.SUPPRESS)
+            or isinstance(action, argparse._StoreTrueAction | argparse._VersionAction)
+        ):
+            return text
+        return super()._get_help_string(action)
+
+
+def _version() -> str:
+    from fov_marl import __version__
+
+    return __version__
+
+
+def add_env_arguments(sp: argparse.ArgumentParser) -> None:
+    """``--config FILE`` and ``--env FIELD=VALUE``: scenario config fields of any command
+    that builds an env."""
+    sp.add_argument(
+        "--config",
+        metavar="FILE.json",
+        default=None,
+        help="scenario config fields from a JSON object (e.g. ScenarioConfig.to_dict() "
+        "saved with json.dump; any subset); --env and the dedicated flags override it",
+    )
+    sp.add_argument(
+        "--env",
+        action="append",
+        metavar="FIELD=VALUE",
+        help="any scenario config field, repeatable, VALUE parsed as JSON (e.g. --env "
+        "density_sigma_m=4 --env density_mean_m=[10,10]); overrides --config",
+    )
+
+
+def add_backend_arguments(sp: argparse.ArgumentParser, workers_default: Any = None) -> None:
+    """``--backend {local,ray}``, ``--ray-address`` and ``--workers``."""
+    sp.add_argument(
+        "--backend",
+        choices=("local", "ray"),
+        default="local",
+        help="where episodes run: local processes, or Ray tasks (the [ray] extra; a local "
+        "Ray unless --ray-address); the same numbers for the same seeds",
+    )
+    sp.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="ADDR",
+        help="an existing Ray cluster ('auto' or ray://host:10001) for --backend ray "
+        "(default: start a local Ray with --workers CPUs)",
+    )
+    sp.add_argument(
+        "--workers",
+        type=_positive_int("--workers", 256),
+        default=workers_default,
+        help="parallel processes (local) or CPUs of a local Ray, in [1, 256] "
+        + (
+            f"(default: {workers_default})"
+            if workers_default is not None
+            else "(default: 1 local, every CPU with --backend ray)"
+        ),
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
-    fmt = argparse.ArgumentDefaultsHelpFormatter
+    fmt = _HelpFormatter
     p = _Parser(prog="fov-marl", description=__doc__, formatter_class=fmt)
+    p.add_argument(
+        "--version", action="version", version=f"fov-marl {_version()}", help="print the version"
+    )
     p.add_argument(
         "--debug",
         action="store_true",
@@ -388,12 +473,18 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     def scenario_args(sp: argparse.ArgumentParser, policy_default: str = "pfcbf") -> None:
-        sp.add_argument("--scenario", choices=("coverage", "crossing"), default="coverage")
+        sp.add_argument(
+            "--scenario",
+            choices=("coverage", "crossing"),
+            default=None,
+            help="coverage (paper VII-A/B/C) or crossing (VII-D) (default: a model's "
+            "own scenario, the --config file's, else coverage)",
+        )
         sp.add_argument(
             "--policy",
             default=policy_default,
             help="registered policy (pfcbf, ideal, lloyd-pf, random) or PATH to a trained "
-            "model.zip (evaluate only)",
+            f"model.zip or run folder (default: {policy_default})",
         )
         sp.add_argument(
             "--n-agents",
@@ -426,6 +517,7 @@ def build_parser() -> argparse.ArgumentParser:
             default=None,
             help="episode length in steps of dt = 0.2 s (default: the config's, 1000)",
         )
+        add_env_arguments(sp)
 
     e = sub.add_parser(
         "evaluate",
@@ -434,11 +526,14 @@ def build_parser() -> argparse.ArgumentParser:
         parents=[common],
     )
     scenario_args(e)
-    e.add_argument("--episodes", type=_positive_int("--episodes", 10**6), default=5)
     e.add_argument(
-        "--workers", type=_positive_int("--workers", 256), default=1, help="parallel processes"
+        "--episodes",
+        type=_positive_int("--episodes", 10**6),
+        default=5,
+        help="episodes to run, in [1, 1e6]",
     )
-    e.add_argument("--out", default=None, help="directory for results.json")
+    add_backend_arguments(e)
+    e.add_argument("--out", default=None, help="directory for results.json (default: none)")
     e.add_argument(
         "--save-series", action="store_true", help="store eta(t) per episode in results.json"
     )
@@ -455,12 +550,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument(
         "--quick", action="store_true", help="every section at a tiny size (under a minute)"
     )
-    r.add_argument(
-        "--workers",
-        type=_positive_int("--workers", 256),
-        default=min(os.cpu_count() or 1, 256),
-        help="parallel processes, in [1, 256]",
-    )
+    add_backend_arguments(r, workers_default=min(os.cpu_count() or 1, 256))
     r.add_argument(
         "--seeds",
         type=_positive_int("--seeds", 1000),
@@ -478,7 +568,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     scenario_args(d)
     d.add_argument(
-        "--out", default="episode.gif", help="output file (.gif, .mp4 or .png for the last frame)"
+        "--out",
+        default="episode.gif",
+        help="output file: .gif, .mp4 (the [video] extra: imageio-ffmpeg) or .png (the last frame)",
     )
     d.add_argument(
         "--every",
@@ -489,6 +581,14 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument(
         "--fps", type=_positive_int("--fps", 100), default=10, help="frames per second, [1, 100]"
     )
+    d.add_argument(
+        "--beliefs-of",
+        default="robot_0",
+        metavar="robot_k|all|none",
+        help="whose particle filters to draw: one robot, every robot, or none (PF+CBF "
+        "policies and --safety-filter)",
+    )
+    d.add_argument("--no-legend", action="store_true", help="draw no legend")
     d.set_defaults(func=run_render)
 
     b = sub.add_parser(
@@ -521,7 +621,7 @@ def build_parser() -> argparse.ArgumentParser:
         add_train_arguments(t)
         t.set_defaults(func=run_train)
     except ImportError as exc:  # training extra not installed
-        msg = f"training needs the 'train' extra (pip install fov_marl[train]): {exc}"
+        msg = f"training needs the 'train' extra (pip install 'fov_marl[train]'): {exc}"
 
         def _no_train(_args: argparse.Namespace) -> None:
             raise CliError(msg)

@@ -98,7 +98,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -111,6 +114,7 @@ from fov_marl.validation import (
     check_real,
     check_real_array,
     check_real_sequence,
+    describe,
     is_real,
 )
 
@@ -124,6 +128,9 @@ __all__ = [
     "MAX_ETA_CELLS_PER_AXIS",
     "MAX_ETA_STENCIL",
     "REPRODUCE_SIGMA_M",
+    "read_config_file",
+    "cli_overrides",
+    "source_of_error",
 ]
 
 #: Density σ (m) of the paper's comparison in ``fov-marl reproduce`` (module docstring).
@@ -380,6 +387,37 @@ class ScenarioConfig:
         out["density_mean_m"] = list(self.density_mean_m)
         return out
 
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> ScenarioConfig:
+        """The inverse of :meth:`to_dict`: a validated config from a dict of fields.
+
+        ``data`` may hold any subset of the fields (the rest take the defaults of its
+        ``scenario``, ``"coverage"`` when absent, as :func:`make_config`); lists are
+        accepted where :meth:`to_dict` writes them (``meas_cov_diag``,
+        ``density_mean_m``, ``initial_poses`` as ``(N, 3)`` nested lists or null).
+        ``ScenarioConfig.from_dict(c.to_dict()) == c`` for every config ``c`` (and its
+        ``initial_poses`` are equal too).
+
+        Raises:
+            ConfigError: ``data`` is not a mapping with string keys, a key is not a field
+                (the message lists the valid ones), or a value is invalid (naming it).
+        """
+        if not isinstance(data, Mapping):
+            raise ConfigError(
+                f"a scenario config must be a mapping of field names, got {describe(data)}"
+            )
+        bad = [k for k in data if not isinstance(k, str)]
+        if bad:
+            raise ConfigError(f"config field names must be strings, got {describe(bad[0])}")
+        unknown = sorted(set(data) - _FIELDS)
+        if unknown:
+            raise ConfigError(
+                f"unknown config field(s) {unknown}; valid fields are {sorted(_FIELDS)}"
+            )
+        kw = dict(data)
+        scenario = kw.pop("scenario", None)
+        return make_config(scenario=scenario, **kw)
+
     def _validated_poses(self, poses: Any) -> np.ndarray:
         n = self.n_agents
         arr = check_real_array(
@@ -402,7 +440,11 @@ class ScenarioConfig:
                     f"apart; must be >= 2 * robot_radius_m = {2 * r} m"
                 )
         arr = arr.copy()
-        arr[:, 2] = np.arctan2(np.sin(arr[:, 2]), np.cos(arr[:, 2]))
+        yaw = arr[:, 2]
+        # wrap to (-pi, pi], leaving yaws already there untouched (so that
+        # from_dict(to_dict()) is exact: arctan2(sin, cos) moves some by one ulp)
+        inside = (yaw > -np.pi) & (yaw <= np.pi)
+        arr[:, 2] = np.where(inside, yaw, np.arctan2(np.sin(yaw), np.cos(yaw)))
         arr.setflags(write=False)
         return arr
 
@@ -495,3 +537,84 @@ def _centre_density(kwargs: dict[str, Any], old_arena: float, old_mean: tuple) -
 
 
 _DEFAULT = ScenarioConfig()
+
+
+def read_config_file(path: str | os.PathLike, flag: str = "--config") -> dict[str, Any]:
+    """The scenario config fields of a JSON file (``fov-marl ... --config FILE``).
+
+    The file holds a JSON object of :class:`ScenarioConfig` fields, any subset
+    (``ScenarioConfig.to_dict()`` written with ``json.dump`` is one). It is validated as
+    :meth:`ScenarioConfig.from_dict` would (alone, before other flags are applied).
+
+    Returns:
+        The fields as given (``scenario`` included when the file has it).
+
+    Raises:
+        ConfigError: the file cannot be read, is not JSON, is not an object, has an
+            unknown field or an invalid value; the message starts with ``flag`` and
+            the path.
+    """
+    import json
+
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+        data = json.loads(text)
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        reason = getattr(exc, "strerror", None) or " ".join(str(exc).split())
+        raise ConfigError(f"{flag} {path}: not a readable JSON file ({reason})") from None
+    if not isinstance(data, dict):
+        raise ConfigError(
+            f"{flag} {path}: must hold a JSON object of config fields, got {type(data).__name__}"
+        )
+    try:
+        ScenarioConfig.from_dict(data)
+    except ConfigError as exc:
+        raise ConfigError(f"{flag} {path}: {exc}") from None
+    return data
+
+
+def cli_overrides(
+    config_file: str | os.PathLike | None, env_items: list[str] | None
+) -> tuple[str | None, dict[str, Any], dict[str, str]]:
+    """Config fields from ``--config FILE`` and ``--env FIELD=VALUE`` (later wins).
+
+    Returns:
+        ``(scenario or None, fields, sources)``: the file's ``scenario`` if it has one,
+        the merged fields (``scenario`` removed), and for each field the flag it came
+        from (``"--env"`` or ``"--config FILE"``), to name it in error messages.
+
+    Raises:
+        ConfigError: an unreadable or invalid file, an ``--env`` item that is not
+            ``FIELD=VALUE``, an unknown field, or ``--env scenario=...`` (naming the
+            flag).
+    """
+    from fov_marl.validation import parse_assignments
+
+    fields: dict[str, Any] = {}
+    sources: dict[str, str] = {}
+    scenario = None
+    if config_file is not None:
+        fields = dict(read_config_file(config_file))
+        scenario = fields.pop("scenario", None)
+        sources = dict.fromkeys(fields, f"--config {config_file}")
+    env = parse_assignments(env_items, "--env")
+    if "scenario" in env:
+        raise ConfigError("--env scenario=...: give the scenario with --scenario")
+    unknown = sorted(set(env) - _FIELDS)
+    if unknown:
+        raise ConfigError(
+            f"--env unknown config field(s) {unknown}; valid fields are "
+            f"{sorted(_FIELDS - {'scenario'})}"
+        )
+    fields.update(env)
+    sources.update(dict.fromkeys(env, "--env"))
+    return scenario, fields, sources
+
+
+def source_of_error(message: str, sources: dict[str, str]) -> str | None:
+    """The flag in ``sources`` (field -> flag) whose field a config error names first
+    (``"fov_deg = 400 must ..."``, ``"density_mean_m[x] ..."``), or None."""
+    import re
+
+    m = re.match(r"(?:unknown config field\(s\) \[')?([A-Za-z_][A-Za-z0-9_]*)", message)
+    return sources.get(m.group(1)) if m else None

@@ -49,6 +49,9 @@ __all__ = [
     "bootstrap_ci",
     "paired_difference",
     "time_to_settle",
+    "episode_job",
+    "run_episodes",
+    "is_model_path",
 ]
 
 #: Normalised coverage threshold: ``time_to_eta_norm_s`` is the first time η reaches this
@@ -312,6 +315,104 @@ def run_episode(
         min_distance_series=mind_series,
         trajectory=traj,
     )
+
+
+def is_model_path(policy: Any) -> bool:
+    """True when ``policy`` names a trained model (a ``.zip`` file or a run folder)."""
+    import os
+
+    return isinstance(policy, str) and (policy.endswith(".zip") or os.path.isdir(policy))
+
+
+def episode_job(job: dict[str, Any], on_step: Callable[[Any, dict], None] | None = None) -> dict:
+    """One episode from a picklable job, as its JSON-ready record (a backend task).
+
+    ``job`` holds :func:`run_episode` keywords; ``job["policy"]`` is a registered name
+    or the path of a trained model (loaded here, in the worker: its ``config.json``
+    fills the config fields the job does not give, and its safety filter applies).
+    ``on_step`` is forwarded to :func:`run_episode` (in-process progress).
+    """
+    job = dict(job)
+    policy = job.pop("policy")
+    if is_model_path(policy):
+        from fov_marl.training import load_policy  # torch only for learned policies
+
+        loaded = load_policy(policy)
+        job = {**loaded.env_kwargs, **job}
+        job["safety_filter"] = job.get("safety_filter") or loaded.safety_filter
+        rec = run_episode(policy=loaded.factory, on_step=on_step, **job)
+        rec.policy = str(policy)
+    else:
+        rec = run_episode(policy=policy, on_step=on_step, **job)
+    return rec.to_json()
+
+
+def run_episodes(
+    scenario: str,
+    policy: str,
+    seeds: Sequence[int],
+    *,
+    safety_filter: bool = False,
+    backend: str = "local",
+    workers: int = 1,
+    ray_address: str | None = None,
+    progress: bool = False,
+    **env_kwargs: Any,
+) -> list[EpisodeRecord]:
+    """Run one seeded episode per seed on a backend (:mod:`fov_marl.backends`).
+
+    Args:
+        scenario: ``"coverage"`` or ``"crossing"``.
+        policy: a registered policy name or the path of a trained ``model.zip``.
+        seeds: one episode per seed, records in this order.
+        backend: ``"local"`` (this process or ``workers`` processes) or ``"ray"``.
+        workers: local processes, or the CPUs of a local Ray started here.
+        ray_address: an existing Ray cluster for ``backend="ray"``.
+        progress: a progress bar on stderr (per simulated step in this process, per
+            finished episode otherwise; tqdm or rich, nothing if neither is installed).
+        **env_kwargs: config fields.
+
+    Returns:
+        The records, in seed order; the same numbers for any backend and worker count
+        (only the wall-clock ``cpu_ms_*`` fields differ).
+    """
+    from fov_marl.backends import map_jobs, progress_bar
+    from fov_marl.config import make_config
+
+    jobs = [
+        dict(scenario=scenario, policy=policy, seed=int(s), safety_filter=safety_filter,
+             **env_kwargs)
+        for s in seeds
+    ]  # fmt: skip
+    # the bar counts env steps, each episode at most ``limit`` (a model's own horizon
+    # may differ: every episode then advances the bar by exactly ``limit``)
+    limit = int(env_kwargs.get("max_cycles") or make_config(scenario=scenario).max_cycles)
+    bar = progress_bar(len(jobs) * limit, "evaluate", "step", enabled=progress)
+    counted = [0]
+
+    def on_step(env: Any, infos: dict) -> None:
+        if counted[0] < limit:
+            counted[0] += 1
+            bar.update(1)
+
+    def on_result(k: int, res: dict[str, Any]) -> None:
+        bar.update(limit - counted[0])  # the rest of this episode's budget
+        counted[0] = 0
+
+    try:
+        results = map_jobs(
+            episode_job,
+            jobs,
+            backend=backend,
+            workers=workers,
+            ray_address=ray_address,
+            on_result=on_result,
+            local_kwargs={"on_step": on_step} if progress else None,
+        )
+    finally:
+        bar.close()
+    fields = set(EpisodeRecord.__dataclass_fields__)
+    return [EpisodeRecord(**{k: v for k, v in r.items() if k in fields}) for r in results]
 
 
 #: stages that ``PfCbfPipeline.last_timings`` times inside another: sub-stage -> parent

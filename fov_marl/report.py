@@ -32,15 +32,14 @@ import hashlib
 import json
 import math
 import os
-import sys
 import time
 from collections.abc import Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from fov_marl.backends import Progress, map_jobs, progress_bar
 from fov_marl.config import REPRODUCE_SIGMA_M, make_config
 from fov_marl.evaluation import (
     ETA_NORM_THRESHOLD,
@@ -69,7 +68,10 @@ COMPARISONS = (("pfcbf 120°", "pfcbf 360°"), ("pfcbf 120°", "ideal"), ("pfcbf
 #: Fraction of ideal's final η (same seed) for the issue's paired reading of the threshold.
 IDEAL_FRACTION = 0.99
 #: Source files that cannot change an episode (left out of the cache fingerprint).
-_NOT_EPISODE = {"report.py", "plots.py", "cli.py", "demo.py", "video.py", "bench.py", "stress.py"}
+_NOT_EPISODE = {
+    "report.py", "plots.py", "cli.py", "demo.py", "video.py", "bench.py", "stress.py",
+    "backends.py", "tables.py",
+}  # fmt: skip
 
 
 # ------------------------------------------------------------------------------ jobs
@@ -261,14 +263,16 @@ class _CalibrationProbe:
         s["a_undetected_m"].append(float(est["ellipse_a"][~det].mean()) if (~det).any() else 0.0)
 
 
-def run_job(job: Job) -> dict[str, Any]:
-    """Run one job; returns the JSON-ready result stored in the cache."""
+def run_job(job: Job, on_step: Any = None) -> dict[str, Any]:
+    """Run one job; returns the JSON-ready result stored in the cache.
+
+    ``on_step(env, infos)``, if given, is called after every step (progress)."""
     from fov_marl.baselines import make_policy
 
     t0 = time.perf_counter()
     kw = job.run_kwargs
     probe: list[_CalibrationProbe] = []
-    on_step = None
+    hooks = [on_step] if on_step is not None else []
     if job.get("_probe"):
         name = kw["policy"]
 
@@ -279,11 +283,16 @@ def run_job(job: Job) -> dict[str, Any]:
         factory.__name__ = name
         kw["policy"] = factory
 
-        def on_step(env: Any, infos: Any) -> None:
-            probe[0].record()
+        hooks.append(lambda env, infos: probe[0].record())
+
+    def each_step(env: Any, infos: Any) -> None:
+        for hook in hooks:
+            hook(env, infos)
 
     keep = job.get("_keep")
-    rec = run_episode(**kw, record_trajectory=keep is not None, on_step=on_step)
+    rec = run_episode(
+        **kw, record_trajectory=keep is not None, on_step=each_step if hooks else None
+    )
     out: dict[str, Any] = {"record": rec.to_json(with_series=True)}
     if keep == "final":
         out["final_poses"] = rec.trajectory[-1]
@@ -302,80 +311,70 @@ def run_job(job: Job) -> dict[str, Any]:
     return out
 
 
-def _run_cached(job: Job, cache: Path, code: str) -> tuple[dict[str, Any], bool]:
+def _run_cached(
+    job: Job, cache: Path, code: str, on_step: Any = None
+) -> tuple[dict[str, Any], bool]:
     path = cache / f"{_job_key(job, code)}.json"
     if path.exists():
         try:
             return json.loads(path.read_text()), True
         except (OSError, ValueError):
             pass  # a torn file from an interrupted write: run again
-    res = run_job(job)
+    res = run_job(job, on_step=on_step)
     tmp = path.with_suffix(f".tmp{os.getpid()}")
     tmp.write_text(json.dumps(res, default=float))
     os.replace(tmp, path)
     return res, False
 
 
-def _worker(args: tuple[Job, str, str]) -> tuple[dict[str, Any], bool]:
+def _worker(args: tuple[Job, str, str], on_step: Any = None) -> tuple[dict[str, Any], bool]:
+    """One job as a backend task (:func:`fov_marl.backends.map_jobs`): the cached result
+    or a fresh run, and whether it came from the cache."""
     job, cache, code = args
-    return _run_cached(job, Path(cache), code)
+    return _run_cached(job, Path(cache), code, on_step=on_step)
 
 
-class _Progress:
-    """tqdm when installed (the ``train`` extra), else one plain line on stderr."""
-
-    def __init__(self, total: int, desc: str, enabled: bool = True) -> None:
-        self.total, self.n, self.t0, self.desc = total, 0, time.perf_counter(), desc
-        self.hits = 0  # runs read from the cache
-        self.enabled = enabled
-        self.bar = None
-        if enabled:
-            try:
-                from tqdm import tqdm
-
-                self.bar = tqdm(total=total, desc=desc, unit="run", file=sys.stderr)
-            except ImportError:
-                self.bar = None
-
-    def update(self, note: str = "") -> None:
-        self.n += 1
-        if not self.enabled:
-            return
-        if self.bar is not None:
-            self.bar.set_postfix_str(note, refresh=False)
-            self.bar.update(1)
-            return
-        el = time.perf_counter() - self.t0
-        bar = "#" * int(20 * self.n / max(self.total, 1))
-        sys.stderr.write(f"\r{self.desc} [{bar:<20}] {self.n}/{self.total} runs, {el:.0f} s {note}")
-        if self.n == self.total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
+def _job_steps(job: Job) -> int:
+    """The most env steps a job runs (its progress-bar budget)."""
+    if job.get("max_steps"):
+        return int(job["max_steps"])
+    if job.get("max_cycles"):
+        return int(job["max_cycles"])
+    return int(make_config(scenario=job.get("scenario", "coverage")).max_cycles)
 
 
 def _run_all(
-    jobs: Sequence[Job], workers: int, cache: Path, code: str, progress: _Progress
+    jobs: Sequence[Job],
+    workers: int,
+    cache: Path,
+    code: str,
+    progress: Progress,
+    backend: str = "local",
+    ray_address: str | None = None,
 ) -> list[dict[str, Any]]:
-    results: list[dict[str, Any] | None] = [None] * len(jobs)
-    if workers > 1 and len(jobs) > 1:
-        with ProcessPoolExecutor(max_workers=min(workers, len(jobs))) as ex:
-            futs = {ex.submit(_worker, (j, str(cache), code)): k for k, j in enumerate(jobs)}
-            for f in as_completed(futs):
-                k = futs[f]
-                res, hit = f.result()
-                results[k] = res
-                progress.hits += hit
-                progress.update(_note(jobs[k], hit))
-    else:
-        for k, j in enumerate(jobs):
-            results[k], hit = _run_cached(j, cache, code)
-            progress.hits += hit
-            progress.update(_note(j, hit))
-    return results  # type: ignore[return-value]
+    """Every job on a backend, results in job order; the bar advances per simulated step
+    in this process, per finished run elsewhere."""
+    counted = [0]
+
+    def on_step(*_: Any) -> None:
+        counted[0] += 1
+        progress.update(1)
+
+    def on_result(k: int, res: tuple[dict[str, Any], bool]) -> None:
+        progress.hits += res[1]
+        progress.update(max(_job_steps(jobs[k]) - counted[0], 0), _note(jobs[k], res[1]))
+        counted[0] = 0
+
+    out = map_jobs(
+        _worker,
+        [(j, str(cache), code) for j in jobs],
+        backend=backend,
+        workers=workers,
+        ray_address=ray_address,
+        on_result=on_result,
+        local_kwargs={"on_step": on_step},
+    )
+    return [res for res, _ in out]
 
 
 def _note(job: Job, hit: bool) -> str:
@@ -496,6 +495,8 @@ def reproduce(
     workers: int = 1,
     seeds: int | None = None,
     progress: bool = True,
+    backend: str = "local",
+    ray_address: str | None = None,
 ) -> Path:
     """Run every experiment (cached) and write ``out/report.md``, ``out/results.json``,
     ``out/series.json`` and the figures; returns the report's path.
@@ -506,8 +507,15 @@ def reproduce(
         workers: parallel processes for the episodes (the timing runs of Table I always
             run alone, after them).
         seeds: random starts per coverage condition (default 20; 2 with ``quick``).
-        progress: show a progress bar on stderr.
+        progress: show a progress bar on stderr (simulated steps; tqdm or rich).
+        backend: where the episodes run, ``"local"`` or ``"ray"``
+            (:mod:`fov_marl.backends`; ``workers`` is then the CPUs of a local Ray); the
+            Table I timing runs always run here, alone. The numbers do not depend on it.
+        ray_address: an existing Ray cluster for ``backend="ray"``.
     """
+    from fov_marl.backends import check_backend
+
+    check_backend(backend, ray_address)
     from fov_marl.metrics import optimal_eta_solution
 
     out = Path(out)
@@ -522,9 +530,11 @@ def reproduce(
     for j in p["parallel"] + p["serial"]:
         if j["scenario"] == "coverage":
             optimal_eta(make_config(**{k: v for k, v in j.run_kwargs.items() if k in _CFG_KEYS}))
-    bar = _Progress(len(p["parallel"]) + len(p["serial"]), "reproduce", progress)
+    total = sum(_job_steps(j) for j in p["parallel"] + p["serial"])
+    bar = progress_bar(total, "reproduce", "step", enabled=progress)
+    bar.hits = 0  # runs read from the cache
     try:
-        par = _run_all(p["parallel"], workers, cache, code, bar)
+        par = _run_all(p["parallel"], workers, cache, code, bar, backend, ray_address)
         ser = _run_all(p["serial"], 1, cache, code, bar)
     finally:
         bar.close()
@@ -627,7 +637,7 @@ def reproduce(
     figs = _figures(out, results, series, base)
     results["elapsed_s"] = time.perf_counter() - t_start
     results["runs_elapsed_s"] = t_runs
-    results["runs"] = bar.total
+    results["runs"] = len(p["parallel"]) + len(p["serial"])
     results["cached_runs"] = bar.hits
     walls = [r.get("wall_s") for r in par + ser]
     results["runs_wall_s_sum"] = None if None in walls else float(sum(walls))

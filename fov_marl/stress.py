@@ -188,13 +188,16 @@ def _make_env(case: StressCase, seed: int, steps: int) -> Any:
     return env
 
 
-def run_stress_episode(case: StressCase, seed: int, steps: int) -> dict[str, Any]:
+def run_stress_episode(
+    case: StressCase, seed: int, steps: int, on_step: Callable[[], None] | None = None
+) -> dict[str, Any]:
     """Run one seeded episode of ``case`` for at most ``steps`` steps and measure it.
 
     Args:
         case: the case (see :class:`StressCase`).
         seed: seeds the env and the filter; start poses and adversary use child seeds.
         steps: episode length (the env's ``max_cycles``); crossing may end earlier.
+        on_step: called after every step (progress), if given.
 
     Returns:
         ``{"seed", "steps", "robot_steps", "collisions", "first_collision_step",
@@ -217,6 +220,8 @@ def run_stress_episode(case: StressCase, seed: int, steps: int) -> dict[str, Any
     while env.agents:
         obs, _, _, _, infos = env.step(adversary.act(obs))
         n_steps += 1
+        if on_step is not None:
+            on_step()
         robot_steps += len(infos)
         metrics = metrics_of(next(iter(infos.values())))
         if first_collision is None and metrics["collisions_total"] > 0:
@@ -258,9 +263,11 @@ def run_stress_episode(case: StressCase, seed: int, steps: int) -> dict[str, Any
     }
 
 
-def _job(job: tuple[int, StressCase, int, int]) -> tuple[int, dict[str, Any]]:
+def _job(
+    job: tuple[int, StressCase, int, int], on_step: Callable[[], None] | None = None
+) -> tuple[int, dict[str, Any]]:
     index, case, seed, steps = job
-    return index, run_stress_episode(case, seed, steps)
+    return index, run_stress_episode(case, seed, steps, on_step=on_step)
 
 
 def _aggregate(case: StressCase, eps: list[dict[str, Any]], steps: int) -> dict[str, Any]:
@@ -315,6 +322,9 @@ def run_stress(
     seed: int = 0,
     workers: int = 1,
     progress: Callable[[int, int], None] | None = None,
+    *,
+    backend: str = "local",
+    ray_address: str | None = None,
 ) -> list[dict[str, Any]]:
     """Run every case for ``episodes`` seeded episodes of ``steps`` steps.
 
@@ -326,9 +336,13 @@ def run_stress(
         episodes: episodes per case (>= 1); episode k uses seed ``seed + k``.
         steps: steps per episode (>= 1).
         seed: first seed.
-        workers: processes (``concurrent.futures.ProcessPoolExecutor`` when > 1);
+        workers: local processes, or the CPUs of a local Ray (:mod:`fov_marl.backends`);
             the rows do not depend on it.
-        progress: called as ``progress(done, total)`` after every episode.
+        progress: called as ``progress(done, total)`` in simulated steps: after every
+            step when the episodes run in this process, after every episode otherwise
+            (an episode that ends early counts its whole budget of ``steps``).
+        backend: ``"local"`` or ``"ray"``; the rows do not depend on it.
+        ray_address: an existing Ray cluster for ``backend="ray"``.
 
     Returns:
         One dict per case, in the order given (keys in the module docstring, plus the
@@ -337,6 +351,8 @@ def run_stress(
     Raises:
         ValueError: a bad case or argument (naming it).
     """
+    from fov_marl.backends import map_jobs
+
     cases = [StressCase.coerce(c) for c in cases]
     for name, v in (("episodes", episodes), ("steps", steps), ("workers", workers)):
         if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
@@ -348,28 +364,40 @@ def run_stress(
         for c_idx, case in enumerate(cases)
         for k in range(episodes)
     ]
-    results: list[dict[str, Any] | None] = [None] * len(jobs)
-    total = len(jobs)
-    if workers > 1 and total > 1:
-        from concurrent.futures import ProcessPoolExecutor
+    total = len(jobs) * int(steps)
+    state = {"done": 0, "this": 0}
 
-        # biggest teams first so the pool does not wait on one long tail job
-        order = sorted(jobs, key=lambda j: (-j[1].n_agents * (1 + 3 * j[1].filtered), j[0]))
-        with ProcessPoolExecutor(max_workers=min(workers, total)) as ex:
-            for done, (index, rec) in enumerate(ex.map(_job, order), start=1):
-                results[index] = rec
-                if progress is not None:
-                    progress(done, total)
-    else:
-        for done, job in enumerate(jobs, start=1):
-            index, rec = _job(job)
-            results[index] = rec
-            if progress is not None:
-                progress(done, total)
+    def on_step() -> None:
+        state["done"] += 1
+        state["this"] += 1
+        if progress is not None:
+            progress(state["done"], total)
+
+    def on_result(k: int, res: tuple[int, dict[str, Any]]) -> None:
+        state["done"] += int(steps) - state["this"]
+        state["this"] = 0
+        if progress is not None:
+            progress(state["done"], total)
+
+    # biggest teams first so a pool does not wait on one long tail job
+    order = sorted(
+        range(len(jobs)), key=lambda k: (-jobs[k][1].n_agents * (1 + 3 * jobs[k][1].filtered), k)
+    )
+    out = map_jobs(
+        _job,
+        jobs,
+        backend=backend,
+        workers=int(workers),
+        ray_address=ray_address,
+        on_result=on_result,
+        local_kwargs={"on_step": on_step} if progress is not None else None,
+        order=order if (workers > 1 or backend != "local") else None,
+    )
+    results = [rec for _, rec in out]
     rows = []
     for c_idx, case in enumerate(cases):
         eps = results[c_idx * episodes : (c_idx + 1) * episodes]
-        rows.append(_aggregate(case, eps, int(steps)))  # type: ignore[arg-type]
+        rows.append(_aggregate(case, eps, int(steps)))
     return rows
 
 
@@ -437,7 +465,7 @@ STRESS_COLUMNS: tuple[tuple[str, str], ...] = (
 
 def format_stress_table(rows: Sequence[Mapping[str, Any]]) -> str:
     """Plain-text table of :func:`run_stress` rows (one line per case), then a summary line."""
-    from fov_marl.cli import format_table  # lazy: cli will import this module
+    from fov_marl.tables import format_table
 
     def cell(key: str, v: Any) -> Any:
         if key == "filtered":
@@ -544,7 +572,7 @@ def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
             "--starts without --quick: the product of the given lists, the full grid "
             "filling the others. --quick with grid flags filters the quick subset."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=_help_formatter(),
     )
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--quick", action="store_true", help="the representative subset")
@@ -563,7 +591,9 @@ def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
         default=None,
         help=f"comma-separated, from {','.join(available_starts())}",
     )
-    p.add_argument("--scenario", choices=_SCENARIOS, default="coverage")
+    p.add_argument(
+        "--scenario", choices=_SCENARIOS, default="coverage", help="the env the cases run in"
+    )
     p.add_argument(
         "--episodes",
         type=_positive_int("--episodes"),
@@ -576,7 +606,41 @@ def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument(
         "--seed", type=_non_negative_int("--seed"), default=0, help="episode k uses seed + k"
     )
-    p.add_argument("--workers", type=_positive_int("--workers"), default=1, help="processes")
+    p.add_argument(
+        "--workers",
+        type=_positive_int("--workers"),
+        default=None,
+        help="parallel processes (local) or CPUs of a local Ray (default: 1 local, every CPU "
+        "with --backend ray)",
+    )
+    p.add_argument(
+        "--backend",
+        choices=("local", "ray"),
+        default="local",
+        help="where episodes run: local processes, or Ray tasks (the [ray] extra; a local "
+        "Ray unless --ray-address); the same rows for the same seeds",
+    )
+    p.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="ADDR",
+        help="an existing Ray cluster ('auto' or ray://host:10001) for --backend ray "
+        "(default: start a local Ray)",
+    )
+    p.add_argument(
+        "--config",
+        metavar="FILE.json",
+        default=None,
+        help="scenario config fields (a JSON object) for every case, except n_agents, "
+        "fov_deg, max_cycles and initial_poses, which the sweep sets (default: none)",
+    )
+    p.add_argument(
+        "--env",
+        action="append",
+        metavar="FIELD=VALUE",
+        help="a scenario config field for every case, repeatable, VALUE parsed as JSON "
+        "(e.g. --env safety_distance_m=2.5); overrides --config",
+    )
     p.add_argument("--no-filter", action="store_true", help="run the adversaries unfiltered")
     p.add_argument("--json", default=None, metavar="OUT.json", help="also write the rows here")
     p.add_argument(
@@ -587,6 +651,37 @@ def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=cmd_stress)
     return p
+
+
+def _help_formatter() -> type:
+    """The CLI's help formatter (defaults shown once), plain argparse's standalone."""
+    try:
+        from fov_marl.cli import _HelpFormatter
+
+        return _HelpFormatter
+    except ImportError:  # pragma: no cover
+        return argparse.ArgumentDefaultsHelpFormatter
+
+
+def _env_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """``--config`` / ``--env`` fields applied to every case (checked, naming the flag)."""
+    from fov_marl.config import cli_overrides
+
+    file_scenario, kw, sources = cli_overrides(
+        getattr(args, "config", None), getattr(args, "env", None)
+    )
+    if file_scenario is not None and file_scenario != args.scenario:
+        raise ValueError(
+            f"--config {args.config}: its scenario {file_scenario!r} differs from --scenario "
+            f"{args.scenario}; give --scenario {file_scenario}"
+        )
+    fixed = sorted({"n_agents", "fov_deg", "max_cycles", "initial_poses"} & set(kw))
+    if fixed:
+        raise ValueError(
+            f"{sources[fixed[0]]}: {fixed[0]} is set by the sweep (--n-agents, --fov-deg, "
+            "--steps, --starts), not by --config/--env"
+        )
+    return kw
 
 
 def _cases_from_args(args: argparse.Namespace) -> list[StressCase]:
@@ -633,6 +728,19 @@ def _cases_from_args(args: argparse.Namespace) -> list[StressCase]:
             ]
     if args.scenario != "coverage":
         cases = [StressCase(**{**c.describe(), "scenario": args.scenario}) for c in cases]
+    overrides = _env_overrides(args)
+    if overrides:
+        from fov_marl.config import ConfigError, cli_overrides, source_of_error
+
+        _, _, sources = cli_overrides(getattr(args, "config", None), getattr(args, "env", None))
+        try:
+            cases = [
+                StressCase(**{**c.describe(), "env_kwargs": {**dict(c.env_kwargs), **overrides}})
+                for c in cases
+            ]
+        except ConfigError as exc:
+            src = source_of_error(str(exc), sources) or next(iter(sources.values()))
+            raise ValueError(f"{src}: {' '.join(str(exc).split())}") from None
     return cases
 
 
@@ -645,28 +753,31 @@ def cmd_stress(args: argparse.Namespace) -> int:
     Raises:
         ValueError: a bad combination of flags (naming them) or an invalid case.
     """
+    from fov_marl.backends import check_backend, progress_bar
+
+    check_backend(args.backend, args.ray_address)
     cases = _cases_from_args(args)
     episodes = args.episodes if args.episodes is not None else (20 if args.full else 3)
+    workers = args.workers or ((os.cpu_count() or 1) if args.backend == "ray" else 1)
     t0 = time.perf_counter()
+    bar = progress_bar(len(cases) * episodes * args.steps, "stress", "step", not args.quiet)
 
     def progress(done: int, total: int) -> None:
-        if args.quiet:
-            return
-        bar = "#" * int(20 * done / total)
-        el = time.perf_counter() - t0
-        sys.stderr.write(f"\r[{bar:<20}] {done}/{total} episodes, {el:.1f} s")
-        if done == total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+        bar.update(done - bar.n)
 
-    rows = run_stress(
-        cases,
-        episodes=episodes,
-        steps=args.steps,
-        seed=args.seed,
-        workers=args.workers,
-        progress=progress,
-    )
+    try:
+        rows = run_stress(
+            cases,
+            episodes=episodes,
+            steps=args.steps,
+            seed=args.seed,
+            workers=workers,
+            progress=progress,
+            backend=args.backend,
+            ray_address=args.ray_address,
+        )
+    finally:
+        bar.close()
     print(format_stress_table(rows))
     if args.json:
         path = Path(args.json)

@@ -456,3 +456,30 @@ def check_out_file(name: str, value: str | os.PathLike, suffixes: Sequence[str])
     except (OSError, ValueError) as exc:
         raise ConfigError(f"{name} {text!r}: not a usable path ({_path_reason(exc)})") from None
     return p
+
+
+def parse_assignments(items: Sequence[str] | None, flag: str) -> dict[str, Any]:
+    """``["key=value", ...]`` (a repeatable CLI flag) -> dict; values are parsed as JSON
+    when they can be (``n_steps=128``, ``density_mean_m=[10, 10]``,
+    ``policy_kwargs={"net_arch": [32, 32]}``), else kept as strings. A key given twice
+    keeps the last value.
+
+    Raises:
+        ConfigError: an item without ``=`` or with an empty key (the message names
+            ``flag``).
+    """
+    import json
+
+    out: dict[str, Any] = {}
+    for item in items or []:
+        if "=" not in item:
+            raise ConfigError(f"{flag} must be KEY=VALUE, got {item!r}")
+        key, value = item.split("=", 1)
+        key = key.strip()
+        if not key:
+            raise ConfigError(f"{flag} must be KEY=VALUE with a non-empty KEY, got {item!r}")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out

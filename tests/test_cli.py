@@ -272,3 +272,180 @@ def test_interrupt_exits_130_without_traceback(monkeypatch, capsys):
     monkeypatch.setattr(fov_marl.evaluation, "run_episode", interrupted)
     assert main(["evaluate", "--policy", "random", "--episodes", "1", "--quiet"]) == 130
     assert capsys.readouterr().err.strip() == "fov-marl evaluate: interrupted"
+
+
+# ----------------------------------------------------------------------------- issue 13
+@pytest.fixture(scope="module")
+def tiny_model(tmp_path_factory):
+    """A 128-timestep PPO model on 2 coverage robots (a few seconds)."""
+    pytest.importorskip("stable_baselines3")
+    out = tmp_path_factory.mktemp("tiny") / "run"
+    argv = ["train", "--timesteps", "128", "--n-agents", "2", "--num-envs", "1",
+            "--train-max-cycles", "10", "--hp", "n_steps=64", "--hp", "batch_size=64",
+            "--checkpoint-every", "0", "--no-progress", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    return out
+
+
+def test_render_takes_a_model_path_like_evaluate(tiny_model, tmp_path):
+    for policy in (tiny_model / "model.zip", tiny_model):
+        out = tmp_path / f"{policy.name}.gif"
+        argv = ["render", "--policy", str(policy), "--max-cycles", "4", "--every", "2"]
+        assert main([*argv, "--out", str(out)]) == 0
+        from PIL import Image
+
+        with Image.open(out) as im:
+            assert im.n_frames == 2
+
+
+def test_a_model_on_another_scenario_is_a_one_line_error(tiny_model, capsys):
+    import fov_marl.evaluation
+
+    for cmd in ("evaluate", "render"):
+        argv = [cmd, "--policy", str(tiny_model / "model.zip"), "--scenario", "crossing"]
+        err = _error_line([*argv, "--max-cycles", "2"], capsys)
+        assert "--scenario crossing" in err and "'coverage'" in err
+    # without --scenario the model's own scenario is used
+    assert main(["evaluate", "--policy", str(tiny_model), "--episodes", "1",
+                 "--max-cycles", "3", "--quiet"]) == 0  # fmt: skip
+    assert fov_marl.evaluation is not None
+
+
+def _all_subparsers():
+    import argparse
+
+    from fov_marl.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return parser, sub.choices
+
+
+def test_every_flag_has_help_and_its_default_is_printed_once(capsys):
+    parser, commands = _all_subparsers()
+    for name, sp in commands.items():
+        for action in sp._actions:
+            if not action.option_strings or action.help == "==SUPPRESS==":
+                continue
+            assert action.help and action.help.strip(), f"{name} {action.option_strings}"
+        with pytest.raises(SystemExit):
+            main([name, "--help"])
+        text = capsys.readouterr().out
+        assert "(default: None)" not in text and "(default: False)" not in text
+        # one "default" per flag at most: split the help into per-flag paragraphs
+        blocks, cur = [], []
+        for line in text.splitlines():
+            if line.startswith("  -") and cur:
+                blocks.append(" ".join(cur))
+                cur = []
+            cur.append(line.strip())
+        blocks.append(" ".join(cur))
+        for block in blocks:
+            assert block.lower().count("default") <= 1, f"{name}: {block}"
+
+
+def test_version(capsys):
+    import fov_marl
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"fov-marl {fov_marl.__version__}"
+    assert fov_marl.__version__[0].isdigit()
+
+
+def test_progress_is_per_step_with_tqdm(tmp_path, capsys):
+    pytest.importorskip("tqdm")
+    args = [a for a in _eval_args(tmp_path) if a != "--quiet"]
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    assert "80/80" in err  # 2 episodes x 40 steps, counted in steps
+    assert "step" in err
+
+
+def test_progress_falls_back_silently_without_tqdm_and_rich(tmp_path, capsys, monkeypatch):
+    import sys
+
+    from fov_marl.backends import progress_bar
+
+    monkeypatch.setitem(sys.modules, "tqdm", None)
+    monkeypatch.setitem(sys.modules, "rich", None)
+    monkeypatch.setitem(sys.modules, "rich.progress", None)
+    assert progress_bar(3, "x").backend == "none"
+    args = [a for a in _eval_args(tmp_path) if a != "--quiet"]
+    assert main(args) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_progress_uses_rich_without_tqdm(monkeypatch):
+    import sys
+
+    pytest.importorskip("rich")
+    from fov_marl.backends import progress_bar
+
+    monkeypatch.setitem(sys.modules, "tqdm", None)
+    bar = progress_bar(3, "x")
+    assert bar.backend == "rich"
+    bar.update(3)
+    bar.close()
+    assert bar.n == 3
+
+
+def test_one_table_formatter():
+    import fov_marl.cli
+    import fov_marl.stress
+    from fov_marl.tables import format_table
+
+    assert fov_marl.cli.format_table is format_table
+    rows = [{"a": 1, "b": 0.123456}, {"a": 22}]
+    text = format_table(rows, [("A", "a"), ("B", "b")])
+    assert text.splitlines() == [" A       B", "--  ------", " 1  0.1235", "22       -"]
+    assert format_table([[1, 0.123456], [22, None]], ["A", "B"]) == text
+    import inspect
+
+    assert "fov_marl.tables import format_table" in inspect.getsource(fov_marl.stress)
+
+
+def test_evaluate_config_file_and_env_equal_the_python_api(tmp_path, capsys):
+    from fov_marl.config import make_config
+
+    cfg = make_config(n_agents=3, density_sigma_m=4.0, max_cycles=20).to_dict()
+    (tmp_path / "cfg.json").write_text(json.dumps(cfg))
+    base = ["evaluate", "--policy", "random", "--episodes", "1", "--quiet"]
+    assert main([*base, "--config", str(tmp_path / "cfg.json"), "--out", str(tmp_path / "a")]) == 0
+    env = ["--env", "n_agents=3", "--env", "density_sigma_m=4.0", "--env", "max_cycles=20"]
+    assert main([*base, *env, "--out", str(tmp_path / "b")]) == 0
+    a, b = (json.loads((tmp_path / d / "results.json").read_text()) for d in "ab")
+    ref = run_episode("coverage", "random", 0, n_agents=3, density_sigma_m=4.0, max_cycles=20)
+    for data in (a, b):
+        ep = data["episodes"][0]
+        assert ep["final_eta"] == ref.final_eta and ep["steps"] == 20 and ep["n_agents"] == 3
+    # a flag overrides the file, a conflicting --env and flag is an error
+    assert main([*base, "--config", str(tmp_path / "cfg.json"), "--max-cycles", "5"]) == 0
+    capsys.readouterr()
+    err = _error_line([*base, "--env", "max_cycles=7", "--max-cycles", "5"], capsys)
+    assert "--env max_cycles=7 conflicts with --max-cycles 5" in err
+    err = _error_line([*base, "--env", "density_sigma_m=-1"], capsys)
+    assert err.startswith("fov-marl evaluate: error: --env") and "density_sigma_m" in err
+
+
+def test_mp4_without_its_writer_fails_before_simulating(tmp_path, capsys, monkeypatch):
+    import sys
+
+    import fov_marl.evaluation
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the episode ran before the writer was checked")
+
+    monkeypatch.setattr(fov_marl.evaluation, "run_episode", no_work)
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)
+    err = _error_line(["render", "--policy", "random", "--out", str(tmp_path / "x.mp4")], capsys)
+    assert "--out" in err and "[video]" in err and "imageio-ffmpeg" in err
+
+
+def test_mp4_with_its_writer(tmp_path):
+    pytest.importorskip("imageio_ffmpeg")
+    out = tmp_path / "x.mp4"
+    argv = ["render", "--policy", "random", "--max-cycles", "4", "--every", "1", "--out"]
+    assert main([*argv, str(out)]) == 0
+    assert out.stat().st_size > 1000

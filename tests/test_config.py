@@ -384,3 +384,64 @@ def test_resource_guards_concern_coverage_only():
 def test_negative_zero_is_normalised():
     c = make_config(scenario="crossing", crossing_jitter_m=-0.0)
     assert math.copysign(1.0, c.crossing_jitter_m) == 1.0
+
+
+# ------------------------------------------------------------------ from_dict (issue 13)
+def test_from_dict_inverts_to_dict_through_json():
+    import json
+
+    import numpy as np
+
+    from fov_marl.config import ScenarioConfig, make_config
+
+    poses = np.array([[5.0, 5.0, 0.1], [10.0, 12.0, -2.0]])
+    for cfg in (
+        make_config(),
+        make_config(scenario="crossing", fov_deg=90.0, crossing_radius_m=10.0),
+        make_config(n_agents=2, initial_poses=poses, arena_size_m=30.0),
+    ):
+        back = ScenarioConfig.from_dict(json.loads(json.dumps(cfg.to_dict())))
+        assert back == cfg and back.to_dict() == cfg.to_dict()
+        if cfg.initial_poses is not None:
+            assert np.array_equal(back.initial_poses, cfg.initial_poses)
+
+
+def test_from_dict_takes_subsets_and_rejects_unknown_or_bad_fields():
+    import pytest
+
+    from fov_marl.config import ConfigError, ScenarioConfig
+
+    assert ScenarioConfig.from_dict({}).n_agents == 6
+    assert ScenarioConfig.from_dict({"scenario": "crossing"}).n_agents == 4  # its defaults
+    with pytest.raises(ConfigError, match=r"unknown config field\(s\) \['nosuch'\]"):
+        ScenarioConfig.from_dict({"nosuch": 1, "fov_deg": 90})
+    with pytest.raises(ValueError, match="fov_deg"):
+        ScenarioConfig.from_dict({"fov_deg": 400})
+    with pytest.raises(ConfigError, match="mapping"):
+        ScenarioConfig.from_dict([("fov_deg", 90)])
+    with pytest.raises(ConfigError, match="strings"):
+        ScenarioConfig.from_dict({1: 2})
+    with pytest.raises(ConfigError, match="scenario"):
+        ScenarioConfig.from_dict({"scenario": "maze"})
+
+
+def test_read_config_file_names_the_flag_and_the_file(tmp_path):
+    import pytest
+
+    from fov_marl.config import ConfigError, cli_overrides, read_config_file
+
+    good = tmp_path / "c.json"
+    good.write_text('{"scenario": "crossing", "fov_deg": 90}')
+    assert read_config_file(good) == {"scenario": "crossing", "fov_deg": 90}
+    for text, says in (("{nope", "not a readable JSON"), ("[1]", "JSON object"),
+                       ('{"fov_deg": 0}', "fov_deg"), ('{"x": 1}', "unknown")):  # fmt: skip
+        bad = tmp_path / "bad.json"
+        bad.write_text(text)
+        with pytest.raises(ConfigError, match=says) as exc:
+            read_config_file(bad)
+        assert str(exc.value).startswith(f"--config {bad}")
+    with pytest.raises(ConfigError, match="not a readable"):
+        read_config_file(tmp_path / "missing.json")
+    scen, fields, sources = cli_overrides(good, ["fov_deg=60", "density_sigma_m=4"])
+    assert scen == "crossing" and fields == {"fov_deg": 60, "density_sigma_m": 4}
+    assert sources == {"fov_deg": "--env", "density_sigma_m": "--env"}

@@ -70,6 +70,16 @@ def workspace() -> Path:
     ro.chmod(0o500)
     atexit.register(ro.chmod, 0o700)
     (ws / "empty.zip").write_bytes(b"")
+    for name, text in (
+        ("cfg.json", '{"density_sigma_m": 4.0}'),
+        ("cfg_crossing.json", '{"scenario": "crossing"}'),
+        ("badcfg.json", "{not json"),
+        ("cfg_list.json", "[1, 2]"),
+        ("cfg_unknown.json", '{"nosuch": 1}'),
+        ("cfg_bad.json", '{"fov_deg": 400}'),
+        ("cfg_badscenario.json", '{"scenario": "maze"}'),
+    ):
+        (ws / name).write_text(text)
     tiny = [
         "train",
         "--timesteps",
@@ -240,6 +250,34 @@ def _with(command: str, flag: str, value: object, append: bool = False) -> tuple
 BAD_POSITIVE_INT = ["0", "-1", "abc", "", " ", "1.5", "nan", "inf", "0x10", "1e3", "١٢x", "+-3"]
 BAD_NONNEG_INT = ["-1", "abc", "", "1.5", "nan", "-0.5", "1e400"]
 BAD_FOV = ["0", "-30", "360.5", "400", "nan", "inf", "-inf", "abc", "", "1e400", "0x10"]
+BAD_CONFIG = [
+    "{ws}/badcfg.json",
+    "{ws}/cfg_list.json",
+    "{ws}/cfg_unknown.json",
+    "{ws}/cfg_bad.json",
+    "{ws}/cfg_badscenario.json",
+    "{ws}/missing.json",
+    "{ws}/existing_dir",
+    "",
+]
+BAD_ENV = [
+    "density_sigma_m=abc",
+    'density_sigma_m="4"',
+    "nosuch=1",
+    "n_agents=2.5",
+    "fov_deg=400",
+    "fov_deg=NaN",
+    "fov_deg=true",
+    "scenario=crossing",
+    "initial_poses=abc",
+    "initial_poses=[[1,2]]",
+    "arena_size_m=1e400",
+    "eta_grid_m=1e-9",
+    "meas_cov_diag=[0.1,0.1]",
+    'density_mean_m={"x": 1}',
+    "foo",
+    "=1",
+]
 BAD_OUT_DIR = ["{ws}/afile", "{ws}/afile/sub", "", "   ", "{ws}/bad\x00name"] + (
     [] if IS_ROOT else ["{ws}/readonly/sub"]
 )
@@ -298,6 +336,17 @@ SPECS: dict[str, dict[str, dict]] = {
         "--max-cycles": {"bad": BAD_POSITIVE_INT, "good": ["1", "3"]},
         "--episodes": {"bad": [*BAD_POSITIVE_INT, "1000001"], "good": ["1", "2"]},
         "--workers": {"bad": [*BAD_POSITIVE_INT, "257"], "good": ["1", "2"]},
+        "--backend": {"bad": ["nope", "", "RAY"], "good": ["local"]},
+        "--ray-address": {"bad": ["auto", ""], "good": []},
+        "--config": {
+            "bad": BAD_CONFIG,
+            "good": ["{ws}/cfg.json", "{ws}/cfg_crossing.json"],
+        },
+        "--env": {
+            "bad": BAD_ENV,
+            "good": ["density_sigma_m=4", "eta_grid_m=0.5", "arena_size_m=50", "max_cycles=2"],
+            "append": True,
+        },
         "--out": {"bad": BAD_OUT_DIR, "good": ["{ws}/existing_dir", "OUTDIR"]},
         "--save-series": {"bad": ["--save-series=1"], "good": [None]},
         "--quiet": {"bad": ["--quiet=no"], "good": [None]},
@@ -306,9 +355,20 @@ SPECS: dict[str, dict[str, dict]] = {
     "render": {
         "--scenario": {"bad": ["maze", ""], "good": ["coverage", "crossing"]},
         "--policy": {
-            "bad": ["nope", "", "{ws}/model", "{ws}/model/model.zip", "{ws}/empty.zip"],
-            "good": ["random", "pfcbf"],
+            "bad": ["nope", "", "{ws}/empty.zip", "{ws}/truncated/model.zip", "{ws}/wrong_n"],
+            "good": ["random", "pfcbf", "{ws}/model", "{ws}/model/model.zip"],
         },
+        "--config": {"bad": BAD_CONFIG, "good": ["{ws}/cfg.json", "{ws}/cfg_crossing.json"]},
+        "--env": {
+            "bad": BAD_ENV,
+            "good": ["density_sigma_m=4", "arena_size_m=50", "max_cycles=2"],
+            "append": True,
+        },
+        "--beliefs-of": {
+            "bad": ["robot_2", "robot_x", "", "ALL", "robot_-1", "0"],
+            "good": ["robot_1", "all", "none"],
+        },
+        "--no-legend": {"bad": ["--no-legend=1"], "good": [None]},
         "--n-agents": {
             "bad": [*BAD_POSITIVE_INT, "257"],
             "good": ["1", "3"],
@@ -332,7 +392,7 @@ SPECS: dict[str, dict[str, dict]] = {
                 "{ws}/bad\x00.gif",
             ]
             + ([] if IS_ROOT else ["{ws}/readonly/x.gif"]),
-            "good": ["OUTFILE.png", "OUTFILE.gif", "OUTFILE.GIF"],
+            "good": ["OUTFILE.png", "OUTFILE.gif", "OUTFILE.GIF", "OUTFILE.mp4"],
         },
         "--every": {"bad": BAD_POSITIVE_INT, "good": ["1", "2", "1000000"]},
         "--fps": {"bad": [*BAD_POSITIVE_INT, "101", "100000"], "good": ["1", "100"]},
@@ -351,6 +411,8 @@ SPECS: dict[str, dict[str, dict]] = {
         "--out": {"bad": BAD_OUT_DIR, "good": ["OUTDIR", "{ws}/existing_dir"]},
         "--quick": {"bad": ["--quick=yes"], "good": [None]},
         "--workers": {"bad": [*BAD_POSITIVE_INT, "257"], "good": ["1", "256"]},
+        "--backend": {"bad": ["nope", ""], "good": ["local"]},
+        "--ray-address": {"bad": ["auto"], "good": []},
         "--seeds": {"bad": [*BAD_POSITIVE_INT, "1001"], "good": ["1", "1000"]},
         "--debug": {"bad": ["--debug=no"], "good": [None]},
     },
@@ -368,8 +430,18 @@ SPECS: dict[str, dict[str, dict]] = {
             "bad": [*BAD_NONNEG_INT, "2147483648", "4294967296"],
             "good": ["0", "2147483647"],
         },
-        "--out": {"bad": BAD_OUT_DIR, "good": ["OUTDIR", "{ws}/existing_dir"]},
+        "--out": {
+            "bad": [*BAD_OUT_DIR, "{ws}/model"],  # a folder holding a model needs --force
+            "good": ["OUTDIR", "{ws}/existing_dir"],
+        },
+        "--force": {"bad": ["--force=1"], "good": [None]},
+        "--config": {"bad": BAD_CONFIG, "good": ["{ws}/cfg.json", "{ws}/cfg_crossing.json"]},
         "--n-envs": {"bad": [*BAD_POSITIVE_INT, "1025"], "good": ["1", "2"]},
+        "--num-envs": {
+            "bad": [*BAD_POSITIVE_INT, "1025"],
+            "good": ["1", "2"],
+            "names": ("--num-envs", "--n-envs"),
+        },
         "--n-agents": {
             "bad": [*BAD_POSITIVE_INT, "257"],
             "good": ["1", "2", "3"],
@@ -479,6 +551,17 @@ SPECS["stress"] = {
     "--steps": {"bad": BAD_POSITIVE_INT, "good": ["1", "3"]},
     "--seed": {"bad": BAD_NONNEG_INT, "good": ["0", "5"]},
     "--workers": {"bad": BAD_POSITIVE_INT, "good": ["1"]},
+    "--backend": {"bad": ["nope", ""], "good": ["local"]},
+    "--ray-address": {"bad": ["auto", ""], "good": []},
+    "--config": {
+        "bad": [*BAD_CONFIG, "{ws}/cfg_crossing.json"],  # another scenario than --scenario
+        "good": ["{ws}/cfg.json"],
+    },
+    "--env": {
+        "bad": ["n_agents=3", "nosuch=1", "foo", "safety_distance_m=-1", "scenario=crossing"],
+        "good": ["safety_distance_m=2.5", "density_sigma_m=4"],
+        "append": True,
+    },
     "--no-filter": {"bad": ["--no-filter=1"], "good": [None]},
     "--json": {
         "bad": ["{ws}/afile/x.json", "{ws}/existing_dir"],
@@ -498,6 +581,7 @@ GLOBAL_CASES = [
     CliCase(("evaluate", "--n-agents"), "invalid", ("--n-agents",), label="missing value"),
     CliCase(("train",), "invalid", ("--out",), label="train without --out"),
     CliCase(("--help",), "valid", (), label="--help"),
+    CliCase(("--version",), "valid", (), label="--version"),
     CliCase(("train", "--help"), "valid", (), label="train --help"),
 ]
 
@@ -605,8 +689,8 @@ def _stubs(names: tuple[str, ...], calls: list):
     saved = []
     if "reproduce" in names:
 
-        def fake_reproduce(out, quick=False, workers=1, seeds=None):
-            calls.append(("reproduce", out, quick, workers, seeds))
+        def fake_reproduce(out, quick=False, workers=1, seeds=None, backend="local", **kw):
+            calls.append(("reproduce", out, quick, workers, seeds, backend))
             return Path(out) / "report.md"
 
         saved.append((fov_marl.report, "reproduce", fov_marl.report.reproduce))
@@ -752,7 +836,7 @@ def test_full_sweep(case):
 #: flags whose valid values set how much work runs: hypothesis keeps them small
 _COUNT_FLAGS = {
     "--episodes", "--max-cycles", "--timesteps", "--n-envs", "--torch-threads", "--n-agents",
-    "--workers", "--train-max-cycles", "--checkpoint-every",
+    "--workers", "--train-max-cycles", "--checkpoint-every", "--num-envs",
 }  # fmt: skip
 
 
@@ -803,8 +887,8 @@ def test_stubbed_work_gets_the_parsed_flags():
     )
     res = invoke(case)
     assert res.rc == 0, res.stderr
-    name, out, quick, workers, seeds = res.calls[0]
-    assert (name, quick, seeds) == ("reproduce", True, 3) and workers >= 1
+    name, out, quick, workers, seeds, backend = res.calls[0]
+    assert (name, quick, seeds, backend) == ("reproduce", True, 3, "local") and workers >= 1
     res = invoke(CliCase(("bench", "--n-agents", "2", "5"), "valid", (), ("bench",)))
     assert res.rc == 0 and res.calls == [("bench", False, [2, 5])]
 

@@ -7,7 +7,8 @@ import json
 import numpy as np
 
 import fov_marl.report as report
-from fov_marl.report import Job, _Progress, _run_all, _run_cached, plan, run_job
+from fov_marl.backends import progress_bar
+from fov_marl.report import Job, _run_all, _run_cached, plan, run_job
 
 
 def _job(seed: int = 0, **kw) -> Job:
@@ -44,10 +45,13 @@ def test_an_interrupted_run_resumes_from_the_cache(tmp_path, monkeypatch):
     _run_cached(jobs[0], tmp_path, "c")  # finished before the "interruption"
     calls = []
     real = report.run_job
-    monkeypatch.setattr(report, "run_job", lambda j: calls.append(j["seed"]) or real(j))
-    bar = _Progress(len(jobs), "test", enabled=False)
+    monkeypatch.setattr(
+        report, "run_job", lambda j, on_step=None: calls.append(j["seed"]) or real(j, on_step)
+    )
+    bar = progress_bar(3 * 5, "test", enabled=False)
+    bar.hits = 0
     out = _run_all(jobs, 1, tmp_path, "c", bar)
-    assert calls == [1, 2] and bar.n == 3
+    assert calls == [1, 2] and bar.n == 3 * 5 and bar.hits == 1  # steps, cached ones too
     assert [r["record"]["seed"] for r in out] == [0, 1, 2]
 
 
@@ -82,14 +86,16 @@ def test_plan_pairs_the_conditions_and_keeps_quick_small():
     assert steps < 20_000  # robot-steps: ~40 s on one core
 
 
-def test_progress_falls_back_to_a_plain_line_without_tqdm(monkeypatch, capsys):
-    import sys
+def test_progress_counts_steps_in_process(tmp_path):
+    """The bar moves once per simulated step when the runs are in this process."""
+    seen = []
 
-    monkeypatch.setitem(sys.modules, "tqdm", None)  # import tqdm -> ImportError
-    bar = _Progress(2, "reproduce")
-    assert bar.bar is None
-    bar.update("a")
-    bar.update("b")
-    bar.close()
-    err = capsys.readouterr().err
-    assert "2/2 runs" in err and err.endswith("\n")
+    class Bar:
+        n, hits = 0, 0
+
+        def update(self, n=1, note=None):
+            seen.append(n)
+            self.n += n
+
+    _run_all([_job(seed=s) for s in range(2)], 1, tmp_path, "c", Bar())
+    assert seen.count(1) >= 10 and sum(seen) == 10  # 2 runs x 5 steps, step by step

@@ -1,10 +1,14 @@
 """Headless rendering with Pillow; a window (matplotlib) only in ``"human"`` mode.
 
-A frame shows the arena, the density φ as a heat map, sensing disks, FoV sectors,
-robots with their heading and ID, and crossing targets. Policies draw their own
-layers (particles, ellipses, Voronoi cells) through :class:`Canvas`, in world
-coordinates: register a callable with ``env.add_render_layer(fn)``; it is called
-as ``fn(canvas)`` on every frame after the built-in layers.
+A frame shows the arena, FoV sectors, robots with their heading and ID, a title
+(policy, N, β, simulated time) and a legend. Coverage frames add the density φ as a
+heat map and the sensing disks; crossing frames show no density but each robot's
+target (a cross inside the arrival tolerance circle, and a faint line from the
+robot to it). Policies draw their own layers (particles, ellipses, Voronoi cells)
+through :class:`Canvas`, in world coordinates: register a callable with
+``env.add_render_layer(fn)``; it is called as ``fn(canvas)`` on every frame after the
+built-in layers. :func:`draw_beliefs` draws the particle filters of chosen robots
+(``fov-marl render --beliefs-of robot_k|all|none``).
 """
 
 from __future__ import annotations
@@ -13,9 +17,18 @@ import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
-from PIL import Image, ImageDraw
+from PIL import Image, ImageDraw, ImageFont
 
-__all__ = ["Canvas", "RenderLayer", "robot_color", "render_frame", "draw_beliefs"]
+__all__ = [
+    "Canvas",
+    "RenderLayer",
+    "robot_color",
+    "render_frame",
+    "draw_beliefs",
+    "frame_title",
+    "LegendEntry",
+    "CROSSING_BACKGROUND",
+]
 
 RenderLayer = Callable[["Canvas"], None]
 
@@ -111,6 +124,90 @@ class Canvas:
         self.draw.text((x + 4, y - 12), s, fill=color)
 
 
+#: RGB of the arena floor in crossing frames (no density there)
+CROSSING_BACKGROUND = (250, 250, 250)
+#: one legend row: (symbol, RGB colour, label); symbols: "robot", "sector", "disk",
+#: "cross", "dots", "ellipse"
+LegendEntry = tuple[str, tuple[int, int, int], str]
+
+_FONTS: dict[int, object] = {}
+
+
+def _font(size: int):
+    """Pillow's bundled FreeType font at ``size`` px (the bitmap font without FreeType)."""
+    if size not in _FONTS:
+        try:
+            _FONTS[size] = ImageFont.load_default(size=size)
+        except (TypeError, ImportError, OSError):  # Pillow < 10.1 or no FreeType
+            _FONTS[size] = ImageFont.load_default()
+    return _FONTS[size]
+
+
+def frame_title(config, t_s: float | None = None, policy: str | None = None) -> str:
+    """``"pfcbf | N = 6 | beta = 120° | t = 12.4 s"`` (parts that are None left out;
+    "beta" spelled out: the bundled font has no Greek letters)."""
+    parts = [policy] if policy else []
+    parts += [f"{config.scenario}", f"N = {config.n_agents}", f"beta = {config.fov_deg:g}°"]
+    if t_s is not None:
+        parts.append(f"t = {t_s:.1f} s")
+    return " | ".join(parts)
+
+
+def _default_legend(config, n_robots: int, beliefs: bool) -> list[LegendEntry]:
+    grey = (90, 90, 90)
+    entries: list[LegendEntry] = []
+    shown = min(n_robots, 6)
+    for i in range(shown):
+        entries.append(("robot", robot_color(i), f"robot {i}"))
+    if n_robots > shown:
+        entries.append(("robot", grey, f"... {n_robots - shown} more"))
+    entries.append(("sector", grey, f"FoV {config.fov_deg:g}°, R_d {config.detection_range_m:g} m"))
+    if config.scenario == "coverage":
+        entries.append(("disk", grey, f"sensing R_s {config.sensing_radius_m:g} m"))
+        entries.append(("heat", (250, 170, 60), "density phi"))
+    else:
+        entries.append(("cross", grey, "target (colour of its robot)"))
+    if beliefs:
+        entries.append(("dots", grey, "particles (colour of the neighbour)"))
+        entries.append(("ellipse", grey, "95% ellipse"))
+    return entries
+
+
+def _draw_legend(canvas: Canvas, entries: Sequence[LegendEntry]) -> None:
+    """Rows of symbol + label in a translucent box at the top right of the frame."""
+    if not entries:
+        return
+    font = _font(11)
+    d = canvas.draw
+    row_h, sym_w, pad = 14, 16, 4
+    text_w = max(int(d.textlength(lab, font=font)) for _, _, lab in entries)
+    w = pad * 3 + sym_w + text_w
+    h = pad * 2 + row_h * len(entries)
+    x0 = canvas.size_px - canvas.margin - w - 2
+    y0 = canvas.margin + 2
+    d.rectangle([x0, y0, x0 + w, y0 + h], fill=(255, 255, 255, 215), outline=(120, 120, 120))
+    for k, (sym, col, label) in enumerate(entries):
+        cy = y0 + pad + row_h * k + row_h / 2
+        sx = x0 + pad
+        if sym == "robot":
+            d.ellipse([sx + 3, cy - 5, sx + 13, cy + 5], fill=col, outline=(0, 0, 0))
+        elif sym == "sector":
+            d.pieslice([sx - 4, cy - 10, sx + 20, cy + 14], 290, 350, fill=col + (130,))
+        elif sym == "disk":
+            d.ellipse([sx + 2, cy - 6, sx + 14, cy + 6], outline=col, width=1)
+        elif sym == "heat":
+            d.rectangle([sx + 2, cy - 5, sx + 14, cy + 5], fill=col)
+        elif sym == "cross":
+            d.line([sx + 3, cy - 5, sx + 13, cy + 5], fill=col, width=2)
+            d.line([sx + 3, cy + 5, sx + 13, cy - 5], fill=col, width=2)
+        elif sym == "dots":
+            for dx, dy in ((4, -3), (9, 2), (12, -2), (6, 4)):
+                d.ellipse([sx + dx - 1, cy + dy - 1, sx + dx + 1, cy + dy + 1], fill=col)
+        elif sym == "ellipse":
+            d.ellipse([sx + 1, cy - 4, sx + 15, cy + 4], outline=col, width=2)
+        d.text((sx + sym_w + pad, cy - 6), label, fill=(20, 20, 20), font=font)
+
+
 _HEAT_CACHE: dict[tuple, np.ndarray] = {}
 
 
@@ -139,24 +236,39 @@ def render_frame(
     layers: Sequence[RenderLayer] = (),
     size_px: int = 640,
     caption: str = "",
+    *,
+    title: str | None = None,
+    legend: bool | Sequence[LegendEntry] = True,
+    beliefs: bool = False,
 ) -> np.ndarray:
     """Draw one frame.
 
     Args:
         config: the env's :class:`~fov_marl.config.ScenarioConfig`.
-        poses_world: ``(N, 3)`` ground-truth poses.
-        targets_world: ``(N, 2)`` crossing targets or ``None``.
-        layers: extra callables ``fn(canvas)`` drawn last.
+        poses_world: ``(N, 3)`` ground-truth poses [x m, y m, yaw rad].
+        targets_world: ``(N, 2)`` crossing targets (world, m) or ``None``.
+        layers: extra callables ``fn(canvas)`` drawn after the built-in layers.
+        size_px: side of the square frame in pixels.
+        caption: appended to the default title (the env passes ``"t = ... s"``).
+        title: the title line at the top left; ``None``: :func:`frame_title` (scenario,
+            N, β) followed by ``caption``.
+        legend: ``True`` for the default legend (robot colours, FoV sector, sensing
+            disk and density or targets, beliefs when ``beliefs``), ``False`` for
+            none, or the :data:`LegendEntry` rows to show.
+        beliefs: the frame shows particle-filter beliefs (adds their legend rows).
 
     Returns:
         ``(size_px, size_px, 3)`` uint8 RGB frame.
     """
     canvas = Canvas(size_px, config.arena_size_m)
-    heat = _heat_map(
-        size_px, canvas.margin, config.arena_size_m, config.density_mean_m, config.density_sigma_m
-    )
-    canvas.image.paste(Image.fromarray(heat))
     L = config.arena_size_m
+    if config.scenario == "coverage":
+        heat = _heat_map(size_px, canvas.margin, L, config.density_mean_m, config.density_sigma_m)
+        canvas.image.paste(Image.fromarray(heat))
+    else:  # crossing: no density; the targets are what matters
+        canvas.draw.rectangle([0, 0, size_px, size_px], fill=(235, 235, 235))
+        lo, hi = canvas.to_px(np.array([0.0, L])), canvas.to_px(np.array([L, 0.0]))
+        canvas.draw.rectangle([lo[0], lo[1], hi[0], hi[1]], fill=CROSSING_BACKGROUND)
     canvas.polygon(np.array([[0, 0], [L, 0], [L, L], [0, L]]), outline=(60, 60, 60), width=2)
     for i, pose in enumerate(poses_world):
         col = robot_color(i)
@@ -164,8 +276,12 @@ def render_frame(
         if config.scenario == "coverage":
             canvas.circle(pose[:2], config.sensing_radius_m, outline=col + (150,))
     if targets_world is not None:
-        for i, t in enumerate(targets_world):
+        tol = float(getattr(config, "target_tolerance_m", 0.5))
+        for i, t in enumerate(np.asarray(targets_world, dtype=np.float64)):
             col = robot_color(i)
+            if i < len(poses_world):
+                canvas.line(poses_world[i][:2], t, col + (90,), width=1)
+            canvas.circle(t, max(tol, 0.6), outline=col, fill=col + (40,), width=2)
             canvas.line(t - [0.6, 0.6], t + [0.6, 0.6], col, width=3)
             canvas.line(t + [-0.6, 0.6], t + [0.6, -0.6], col, width=3)
     for layer in layers:
@@ -176,8 +292,18 @@ def render_frame(
         head = pose[:2] + 1.5 * np.array([math.cos(pose[2]), math.sin(pose[2])])
         canvas.line(pose[:2], head, (0, 0, 0), width=2)
         canvas.text(pose[:2], str(i))
-    if caption:
-        canvas.draw.text((canvas.margin + 4, canvas.margin + 2), caption, fill=(0, 0, 0))
+    if title is None:
+        title = frame_title(config) + (f" | {caption.strip()}" if caption.strip() else "")
+    if title:
+        font = _font(13)
+        x, y = canvas.margin + 4, canvas.margin + 3
+        w = canvas.draw.textlength(title, font=font)
+        canvas.draw.rectangle([x - 2, y - 1, x + w + 3, y + 15], fill=(255, 255, 255, 200))
+        canvas.draw.text((x, y), title, fill=(0, 0, 0), font=font)
+    if legend is True:
+        _draw_legend(canvas, _default_legend(config, len(poses_world), beliefs))
+    elif legend:
+        _draw_legend(canvas, legend)
     return np.asarray(canvas.image, dtype=np.uint8).copy()
 
 
@@ -208,20 +334,29 @@ class HumanWindow:
 
 
 def draw_beliefs(
-    canvas: Canvas, pipeline, robots: Sequence[int] = (0,), particles: bool = True
+    canvas: Canvas, pipeline, robots: Sequence[int] | str = (0,), particles: bool = True
 ) -> None:
     """Draw robots' beliefs from a :class:`fov_marl.pipeline.PfCbfPipeline`: particles and
     95% ellipses, coloured by neighbour, placed with each robot's own pose estimate.
 
-    Duck-typed on the pipeline (``bank``, ``own_pose``, ``estimates_view``) so the env
-    layer does not import the controller layer.
+    Args:
+        canvas: the frame.
+        pipeline: duck-typed (``bank``, ``own_pose``, ``estimates_view``) so the env
+            layer does not import the controller layer.
+        robots: indices of the robots whose beliefs are drawn, or ``"all"``.
+        particles: draw the particles (at most ~1500 per robot), not only the ellipses.
     """
     from fov_marl.geometry import body_to_world
 
     est = pipeline.estimates_view()
     if est is None:
         return
-    for i in robots:
+    n = len(pipeline.own_pose)
+    chosen = range(n) if isinstance(robots, str) and robots == "all" else robots
+    for i in chosen:
+        i = int(i)
+        if not 0 <= i < n:
+            raise ValueError(f"robots must be indices in [0, {n - 1}] or 'all', got {i}")
         pose = pipeline.own_pose[i]
         bank = pipeline.bank
         if particles and bank is not None:

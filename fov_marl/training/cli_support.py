@@ -24,6 +24,7 @@ import importlib.util
 import json
 import math
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -77,31 +78,25 @@ def _fov(flag: str):
 def parse_hyperparams(items: list[str] | None, flag: str = "--hp") -> dict[str, Any]:
     """``["key=value", ...]`` -> dict; values are parsed as JSON when they can be
     (``n_steps=128``, ``policy_kwargs={"net_arch": [32, 32]}``), else kept as strings.
-    A key given twice keeps the last value.
+    A key given twice keeps the last value
+    (:func:`fov_marl.validation.parse_assignments`).
 
     Raises:
         ValueError: an item without ``=`` or with an empty key (the message names ``flag``).
     """
-    out: dict[str, Any] = {}
-    for item in items or []:
-        if "=" not in item:
-            raise ValueError(f"{flag} must be KEY=VALUE, got {item!r}")
-        key, value = item.split("=", 1)
-        key = key.strip()
-        if not key:
-            raise ValueError(f"{flag} must be KEY=VALUE with a non-empty KEY, got {item!r}")
-        try:
-            out[key] = json.loads(value)
-        except json.JSONDecodeError:
-            out[key] = value
-    return out
+    from fov_marl.validation import parse_assignments
+
+    return parse_assignments(items, flag)
 
 
 def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``fov-marl train`` options to ``parser``."""
     parser.add_argument("--algo", choices=("ppo", "sac"), default="ppo", help="SB3 algorithm")
     parser.add_argument(
-        "--scenario", choices=("coverage", "crossing"), default="coverage", help="environment"
+        "--scenario",
+        choices=("coverage", "crossing"),
+        default=None,
+        help="environment (default: the --config file's, else coverage)",
     )
     parser.add_argument(
         "--safety-filter",
@@ -123,7 +118,10 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         "--timesteps",
         type=_int_in("--timesteps", 1, 10**12, sci=True),
         default=_DEFAULT_TIMESTEPS,
-        help="robot-steps (samples) to train for, in [1, 1e12]; 1e6 notation accepted",
+        help="robot-steps (samples) to train for, in [1, 1e12]; 1e6 notation accepted. "
+        "SB3 runs whole rollouts, so this is rounded up to a multiple of n_steps x n_envs x "
+        "n_agents for PPO (6144 at the defaults), of train_freq x n_envs x n_agents for SAC; "
+        "the effective number is printed before training starts",
     )
     parser.add_argument(
         "--seed",
@@ -131,9 +129,24 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         default=0,
         help=f"seeds SB3 and the env copies (copy k: seed + k), in [0, {MAX_SEED}]",
     )
-    parser.add_argument("--out", required=True, help="output folder (model.zip, config.json, tb/)")
     parser.add_argument(
-        "--n-envs", type=_int_in("--n-envs", 1, 1024), default=4, help="env copies, in [1, 1024]"
+        "--out",
+        required=True,
+        help="output folder (model.zip, config.json, vecnormalize.pkl, checkpoints/, tb/); "
+        "one that already holds a model is refused unless --force",
+    )
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="overwrite the model.zip and config.json already in --out",
+    )
+    parser.add_argument(
+        "--n-envs",
+        "--num-envs",
+        dest="n_envs",
+        type=_int_in("--n-envs", 1, 1024),
+        default=4,
+        help="env copies (each robot of each copy is one SB3 slot), in [1, 1024]",
     )
     parser.add_argument(
         "--n-agents",
@@ -154,10 +167,18 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         help="episode length while training (evaluation keeps the env's 1000)",
     )
     parser.add_argument(
+        "--config",
+        metavar="FILE.json",
+        default=None,
+        help="scenario config fields from a JSON object (e.g. ScenarioConfig.to_dict() "
+        "saved with json.dump; any subset); --env and the dedicated flags override it",
+    )
+    parser.add_argument(
         "--env",
         action="append",
         metavar="FIELD=VALUE",
-        help="any scenario config field, repeatable (e.g. --env density_sigma_m=4)",
+        help="any scenario config field, repeatable, VALUE parsed as JSON (e.g. --env "
+        "density_sigma_m=4); overrides --config",
     )
     parser.add_argument(
         "--hp",
@@ -170,7 +191,8 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         "--checkpoint-every",
         type=_int_in("--checkpoint-every", 0, sci=True),
         default=100_000,
-        help="timesteps between checkpoints in OUT/checkpoints (0: none)",
+        help="timesteps between checkpoints in OUT/checkpoints (0: none); Ctrl-C also "
+        "saves the model trained so far",
     )
     parser.add_argument(
         "--torch-threads",
@@ -178,7 +200,9 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         default=1,
         help="torch.set_num_threads while training (1 is fastest for these small MLPs)",
     )
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    parser.add_argument(
+        "--no-progress", action="store_true", help="hide SB3's progress bar (per timestep)"
+    )
     parser.add_argument("--verbose", action="store_true", help="print SB3's log table")
 
 
@@ -202,36 +226,90 @@ def _flag_of(message: str, args: argparse.Namespace) -> str:
     return ""
 
 
-def run_train(args: argparse.Namespace) -> Path:
-    """Run :func:`fov_marl.training.train` from parsed ``fov-marl train`` arguments.
+def _resolve(args: argparse.Namespace) -> tuple[str, dict[str, Any], dict[str, str]]:
+    """(scenario, env_kwargs, field -> flag) from --config, --env and the dedicated flags."""
+    from fov_marl.config import cli_overrides
 
-    Every argument (``--out``, ``--env``, ``--hp``, the scenario config and the buffer
-    sizes) is checked before training starts. Returns the path of ``model.zip`` (also
-    printed). Invalid values raise ``ValueError`` with one clear message naming the flag.
-    """
-    from fov_marl.training.trainer import train, validate_hyperparams
-    from fov_marl.validation import ConfigError, check_out_dir
+    file_scenario, env_kwargs, sources = cli_overrides(args.config, getattr(args, "env", None))
+    if file_scenario is not None and file_scenario not in ("coverage", "crossing"):
+        raise ValueError(
+            f"--config {args.config}: scenario must be 'coverage' or 'crossing', "
+            f"got {file_scenario!r}"
+        )
+    if args.scenario is not None and file_scenario not in (None, args.scenario):
+        raise ValueError(
+            f"--scenario {args.scenario} conflicts with --config {args.config}, whose scenario "
+            f"is {file_scenario!r}; give one of them"
+        )
+    scenario = args.scenario or file_scenario or "coverage"
+    for key, flag in (("n_agents", "--n-agents"), ("fov_deg", "--fov-deg")):
+        value = getattr(args, key)
+        if value is None:
+            continue
+        if sources.get(key) == "--env" and env_kwargs[key] != value:
+            raise ValueError(
+                f"--env {key}={env_kwargs[key]!r} conflicts with {flag} {value}; give one of them"
+            )
+        env_kwargs[key] = value
+        sources[key] = flag
+    return scenario, env_kwargs, sources
+
+
+def _check_out(args: argparse.Namespace) -> Path:
+    from fov_marl.validation import check_out_dir
 
     out = check_out_dir("--out", args.out)
-    env_kwargs = parse_hyperparams(getattr(args, "env", None), flag="--env")
+    held = [n for n in ("model.zip", "config.json") if (out / n).exists()]
+    if held and not args.force:
+        raise ValueError(
+            f"--out {args.out} already holds a trained model ({', '.join(held)}); pass --force "
+            "to overwrite it, or choose another --out"
+        )
+    return out
+
+
+def run_train(args: argparse.Namespace) -> Path | int:
+    """Run :func:`fov_marl.training.train` from parsed ``fov-marl train`` arguments.
+
+    Every argument (``--out``, ``--config``, ``--env``, ``--hp``, the scenario config and
+    the buffer sizes) is checked before training starts; the effective number of
+    timesteps (whole rollouts) is printed. Returns the path of ``model.zip`` (also
+    printed), or 130 when Ctrl-C stopped training (the model trained so far is saved,
+    and the message says where). Invalid values raise ``ValueError`` with one clear
+    message naming the flag.
+    """
+    from fov_marl.config import make_config, source_of_error
+    from fov_marl.training.trainer import effective_timesteps, train, validate_hyperparams
+    from fov_marl.validation import ConfigError
+
+    out = _check_out(args)
+    scenario, env_kwargs, sources = _resolve(args)
     hyperparams = parse_hyperparams(args.hp, flag="--hp")
     try:
         validate_hyperparams(args.algo, hyperparams)
     except ConfigError as exc:
         raise ValueError(f"--hp {exc}") from None
-    for key, flag in (("n_agents", "--n-agents"), ("fov_deg", "--fov-deg")):
-        value = getattr(args, key)
-        if value is None:
-            continue
-        if key in env_kwargs and env_kwargs[key] != value:
-            raise ValueError(
-                f"--env {key}={env_kwargs[key]!r} conflicts with {flag} {value}; give one of them"
-            )
-        env_kwargs[key] = value
+    try:
+        train_kwargs = dict(env_kwargs)
+        if "max_cycles" not in train_kwargs:
+            train_kwargs["max_cycles"] = args.train_max_cycles
+        n_agents = make_config(scenario=scenario, **train_kwargs).n_agents
+    except ConfigError as exc:
+        src = source_of_error(str(exc), sources) or _flag_of(str(exc), args) or "--env"
+        raise ValueError(f"{src} {exc}") from None
+    done_at = effective_timesteps(args.algo, args.timesteps, args.n_envs * n_agents, hyperparams)
+    if done_at != args.timesteps:
+        print(
+            f"train: --timesteps {args.timesteps} runs {done_at} timesteps (SB3 collects whole "
+            f"rollouts of {_rollout_text(args.algo, args.n_envs, n_agents, hyperparams)})",
+            flush=True,
+        )
+    else:
+        print(f"train: {done_at} timesteps", flush=True)
     try:
         path = train(
             args.algo,
-            args.scenario,
+            scenario,
             safety_filter=args.safety_filter,
             belief=args.belief,
             belief_kwargs={"init": args.belief_init} if args.belief else None,
@@ -248,12 +326,33 @@ def run_train(args: argparse.Namespace) -> Path:
             verbose=int(args.verbose),
         )
     except ConfigError as exc:
-        flag = _flag_of(str(exc), args)
+        flag = source_of_error(str(exc), sources) or _flag_of(str(exc), args)
         raise ValueError(f"{flag} {exc}" if flag else str(exc)) from None
     cfg = json.loads((Path(path).parent / "config.json").read_text())
+    if cfg.get("interrupted"):
+        ckpt = Path(path).parent / "checkpoints"
+        extra = f"; checkpoints in {ckpt}" if ckpt.is_dir() else ""
+        sys.stderr.write(
+            f"fov-marl train: interrupted after {cfg['timesteps_done']} of {done_at} timesteps; "
+            f'saved the model trained so far to {path} (config.json says "interrupted": '
+            f"true){extra}\n"
+        )
+        return 130
     print(
         f"saved {path} ({cfg['timesteps_done']} timesteps in {cfg['train_wall_s']:.0f} s, "
         f"{cfg['samples_per_s']:.0f} samples/s); evaluate with: "
         f"fov-marl evaluate --policy {path}"
     )
     return Path(path)
+
+
+def _rollout_text(algo: str, n_envs: int, n_agents: int, hyperparams: dict[str, Any]) -> str:
+    from fov_marl.training.trainer import _merged_hyperparams
+
+    hp = _merged_hyperparams(algo, hyperparams)
+    slots = f"{n_envs} env copies x {n_agents} robots"
+    if algo == "ppo":
+        return f"n_steps {hp['n_steps']} x {slots} = {hp['n_steps'] * n_envs * n_agents} samples"
+    freq = hp.get("train_freq", 1)
+    freq = freq[0] if isinstance(freq, list | tuple) else freq
+    return f"train_freq {freq} x {slots} = {freq * n_envs * n_agents} samples"

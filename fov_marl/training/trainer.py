@@ -13,7 +13,11 @@ Timesteps
 ---------
 SB3 counts *samples*: one robot-step is one timestep, so ``timesteps = T`` is
 ``T / n_agents`` env steps spread over ``n_envs`` copies (with N = 6 and 4 copies one
-vectorised step is 24 timesteps).
+vectorised step is 24 timesteps). SB3 collects whole rollouts, so a run ends at the
+next multiple of the rollout size at or above ``T``: ``n_steps x n_envs x n_agents``
+for PPO (256 x 4 x 6 = 6144 at the defaults: ``timesteps=1000`` runs 6144), ``train_freq
+x n_envs x n_agents`` for SAC (:func:`effective_timesteps`; ``fov-marl train`` prints
+it before training starts).
 
 Default hyper-parameters and why (override any with ``hyperparams={...}``)
 --------------------------------------------------------------------------
@@ -146,6 +150,7 @@ __all__ = [
     "POLICY_KWARGS_SPECS",
     "MAX_BUFFER_BYTES",
     "validate_hyperparams",
+    "effective_timesteps",
 ]
 
 ALGOS = {"ppo": PPO, "sac": SAC}
@@ -553,6 +558,40 @@ def _to_sb3_kwargs(hp: dict[str, Any]) -> dict[str, Any]:
     return kw
 
 
+def effective_timesteps(
+    algo: str, timesteps: int, n_slots: int, hyperparams: dict[str, Any] | None = None
+) -> int:
+    """The timesteps SB3 actually runs for ``timesteps`` requested.
+
+    ``learn(total_timesteps=T)`` collects whole rollouts until ``T`` is reached: PPO's
+    rollouts are ``n_steps`` vectorised steps of ``n_slots`` samples each (``n_slots =
+    n_envs x n_agents``), SAC's ``train_freq`` steps (``[k, "episode"]``: at least one
+    vectorised step per round, so the result is then a lower bound).
+
+    Returns:
+        ``ceil(T / block) * block`` with the block size above (``T`` itself when it is a
+        multiple).
+    """
+    hp = _merged_hyperparams(algo, hyperparams)
+    if algo == "ppo":
+        block = int(hp["n_steps"]) * int(n_slots)
+    else:
+        freq = hp.get("train_freq", 1)
+        k, unit = (freq[0], freq[1]) if isinstance(freq, list | tuple) else (freq, "step")
+        block = int(n_slots) * (int(k) if unit == "step" else 1)
+    return -(-int(timesteps) // block) * block
+
+
+def _have_progress_bar() -> bool:
+    """SB3's progress bar needs both tqdm and rich; without either, train without one."""
+    try:
+        import rich  # noqa: F401
+        import tqdm  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def _jsonable(x: Any) -> Any:
     if isinstance(x, dict):
         return {str(k): _jsonable(v) for k, v in x.items()}
@@ -605,10 +644,12 @@ def train(
         safety_filter: train behind :class:`fov_marl.wrappers.SafetyFilterWrapper`.
         belief: add :class:`fov_marl.wrappers.belief.BeliefObservationWrapper` features.
         timesteps: robot-steps (samples) to train for, in [1, 1e12] (see module
-            docstring).
+            docstring); SB3 runs whole rollouts, so the run ends at
+            :func:`effective_timesteps` (``config.json``: ``timesteps_done``).
         seed: seeds SB3 (python, numpy, torch) and the env copies (copy k: seed + k), in
             [0, 2**31 - 1] (SB3 seeds NumPy's legacy generator).
-        out_dir: output folder (created; existing files are overwritten); an existing
+        out_dir: output folder (created; existing files are overwritten: ``fov-marl
+            train`` refuses a folder holding a model unless ``--force``); an existing
             non-directory, a path under one or an unwritable parent is an error before
             anything runs.
         n_envs: env copies, in [1, 1024].
@@ -623,7 +664,8 @@ def train(
             the env's own horizon (default 1000 steps).
         normalize: wrap in ``VecNormalize`` (observations and rewards).
         checkpoint_every: save a checkpoint every this many timesteps (0: never).
-        progress_bar: show SB3's tqdm/rich progress bar.
+        progress_bar: show SB3's tqdm/rich progress bar (per timestep); silently none
+            when tqdm or rich is not installed.
         torch_threads: ``torch.set_num_threads`` during training (restored after), in
             [1, 1024].
         safety_filter_kwargs: keywords of ``SafetyFilterWrapper``.
@@ -651,7 +693,7 @@ def train(
     safety_filter = check_bool("safety_filter", safety_filter)
     belief = check_bool("belief", belief)
     normalize = check_bool("normalize", normalize)
-    progress_bar = check_bool("progress_bar", progress_bar)
+    progress_bar = check_bool("progress_bar", progress_bar) and _have_progress_bar()
     if train_max_cycles is not None:
         train_max_cycles = check_int("train_max_cycles", train_max_cycles, 1, note="(or None)")
     out = check_out_dir("out_dir", out_dir)
@@ -801,8 +843,16 @@ class LearnedPolicy:
     ``[-1, 1]``.
 
     Attributes:
-        algo, scenario, env_kwargs, safety_filter, belief, belief_kwargs,
-        safety_filter_kwargs, n_agents, config (the whole ``config.json``), model.
+        algo: ``"ppo"`` or ``"sac"``.
+        scenario: the scenario it was trained on.
+        env_kwargs: the evaluation config fields (``config.json``'s ``env_kwargs``).
+        safety_filter: trained behind :class:`~fov_marl.wrappers.SafetyFilterWrapper`.
+        safety_filter_kwargs: the wrapper's keywords.
+        belief: uses belief features (computed by the policy itself).
+        belief_kwargs: the belief wrapper's keywords.
+        n_agents: the team size (the observation size depends on it).
+        config: the whole ``config.json``.
+        model: the stable-baselines3 model.
     """
 
     def __init__(self, model: BaseAlgorithm, config: dict[str, Any], obs_norm: Any | None):

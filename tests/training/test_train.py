@@ -295,3 +295,128 @@ def test_cli_runner(tmp_path, capsys):
     assert parse_hyperparams(["gamma=0.995", "note=abc"]) == {"gamma": 0.995, "note": "abc"}
     with pytest.raises(ValueError, match="KEY=VALUE"):
         parse_hyperparams(["gamma"])
+
+
+# ------------------------------------------------------------------- issue 13: CLI
+TINY_CLI = [
+    "train",
+    "--n-agents",
+    "2",
+    "--num-envs",
+    "1",
+    "--train-max-cycles",
+    "10",
+    "--hp",
+    "n_steps=64",
+    "--hp",
+    "batch_size=64",
+    "--checkpoint-every",
+    "0",
+    "--no-progress",
+]
+
+
+def test_timesteps_rounding_is_printed_and_matches_what_ran(tmp_path, capsys):
+    from fov_marl.cli import main
+    from fov_marl.training.trainer import effective_timesteps
+
+    # whole PPO rollouts of n_steps 64 x 1 copy x 2 robots = 128 samples
+    assert effective_timesteps("ppo", 1000, 2, {"n_steps": 64}) == 1024
+    assert effective_timesteps("ppo", 1024, 2, {"n_steps": 64}) == 1024
+    assert effective_timesteps("ppo", 1000, 24) == 6144  # the defaults: 256 x 4 x 6
+    assert effective_timesteps("sac", 1000, 12) == 1008
+    assert main([*TINY_CLI, "--timesteps", "1000", "--out", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out
+    assert "--timesteps 1000 runs 1024 timesteps" in out and "n_steps 64" in out
+    cfg = json.loads((tmp_path / "r" / "config.json").read_text())
+    assert cfg["timesteps_done"] == 1024 and cfg["n_envs"] == 1  # --num-envs is --n-envs
+
+
+def test_out_holding_a_model_needs_force(tmp_path, capsys):
+    from fov_marl.cli import main
+
+    run = [*TINY_CLI, "--timesteps", "128", "--out", str(tmp_path)]
+    assert main(run) == 0
+    first = (tmp_path / "model.zip").read_bytes()
+    capsys.readouterr()
+    assert main([*run, "--seed", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--out" in err and "--force" in err
+    assert (tmp_path / "model.zip").read_bytes() == first  # untouched
+    assert main([*run, "--seed", "1", "--force"]) == 0
+    assert json.loads((tmp_path / "config.json").read_text())["seed"] == 1
+
+
+def test_ctrl_c_saves_says_where_and_exits_130(tmp_path):
+    """A real SIGINT while SB3 learns: the model so far is saved and the exit status is 130."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "run"
+    argv = [*TINY_CLI, "--timesteps", "1e9", "--out", str(out), "--checkpoint-every", "128"]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "fov_marl.cli", *argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        line = proc.stdout.readline()  # "train: ... timesteps", printed before learn()
+        assert "timesteps" in line, line + proc.stderr.read()
+        t0 = time.monotonic()  # a first checkpoint: inside model.learn
+        while not list(out.glob("checkpoints/*.zip")) and time.monotonic() - t0 < 90:
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "saved" in err and str(out / "model.zip") in err
+    assert "Traceback" not in err
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["interrupted"] is True and 0 < cfg["timesteps_done"] < 10**9
+    assert load_policy(out / "model.zip").n_agents == 2
+
+
+def test_train_config_file_and_env(tmp_path, capsys):
+    from fov_marl.cli import main
+
+    cfg_file = tmp_path / "cfg.json"
+    cfg_file.write_text(json.dumps({"scenario": "crossing", "crossing_radius_m": 10.0}))
+    argv = [*TINY_CLI, "--timesteps", "128", "--config", str(cfg_file)]
+    assert main([*argv, "--env", "target_tolerance_m=0.7", "--out", str(tmp_path / "a")]) == 0
+    cfg = json.loads((tmp_path / "a" / "config.json").read_text())
+    assert cfg["scenario"] == "crossing"
+    assert cfg["env_kwargs"]["crossing_radius_m"] == 10.0
+    assert cfg["env_kwargs"]["target_tolerance_m"] == 0.7
+    capsys.readouterr()
+    assert main([*argv, "--scenario", "coverage", "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert "--scenario coverage conflicts with --config" in err and len(err.splitlines()) == 1
+
+
+def test_no_progress_bar_without_tqdm_or_rich(tmp_path, monkeypatch):
+    import sys
+
+    from stable_baselines3 import PPO
+
+    seen = []
+    real = PPO.learn
+
+    def learn(self, *args, **kwargs):
+        seen.append(kwargs["progress_bar"])
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(PPO, "learn", learn)
+    small = dict(timesteps=64, n_envs=1, env_kwargs={"n_agents": 2}, checkpoint_every=0,
+                 hyperparams={"n_steps": 32, "batch_size": 32}, progress_bar=True)  # fmt: skip
+    assert _train(tmp_path / "a", **small).exists()
+    monkeypatch.setitem(sys.modules, "rich", None)  # import rich -> ImportError
+    assert _train(tmp_path / "b", **small).exists()
+    assert seen == [True, False]
