@@ -9,9 +9,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from fov_marl.cli import format_table
 from fov_marl.evaluation import make_env, run_episode
 from fov_marl.plots import plot_episode_summary
+from fov_marl.tables import format_table
 
 
 def main(argv: list[str] | None = None) -> int:

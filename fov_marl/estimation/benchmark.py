@@ -130,10 +130,7 @@ TABLE_COLUMNS = (
 
 def format_table(rows: list[dict]) -> str:
     """Plain-text table of :func:`bench_tracker` rows, drawn by the one table formatter of
-    the package, :func:`fov_marl.cli.format_table` (imported lazily: the CLI sits above
-    this module)."""
-    from fov_marl.cli import format_table as _format_table
+    the package, :func:`fov_marl.tables.format_table`."""
+    from fov_marl.tables import format_table as _format_table
 
-    return _format_table(
-        [[r.get(k) for _, k in TABLE_COLUMNS] for r in rows], [h for h, _ in TABLE_COLUMNS]
-    )
+    return _format_table(rows, TABLE_COLUMNS)
