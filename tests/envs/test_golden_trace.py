@@ -37,7 +37,11 @@ CASES: list[tuple[str, int, dict]] = [
     ("crossing", 1, dict(n_agents=4, max_cycles=70)),
     ("crossing", 2, dict(n_agents=7, fov_deg=360.0, max_cycles=200)),
     # large tolerance: episodes terminate early at random steps
-    ("crossing", 3, dict(n_agents=3, max_cycles=200, target_tolerance_m=17.0)),
+    (
+        "crossing",
+        3,
+        dict(n_agents=3, max_cycles=200, target_tolerance_m=3.4, crossing_radius_m=1.5),
+    ),
 ]
 
 
