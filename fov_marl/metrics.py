@@ -60,6 +60,7 @@ __all__ = [
     "eta_single_disk_at_mean",
     "grid_centres",
     "pairwise_distances",
+    "pairwise_distances_batch",
     "min_pairwise_distance",
     "collision_pairs",
     "safety_violations",
@@ -178,13 +179,54 @@ class CoverageMetric:
         p = _positions(positions_world)
         if p.shape[0] == 0:
             return 0.0
+        return float(self._eta_batch(p[None], exact_sum=True)[0])
+
+    __call__ = eta
+
+    def eta_batch(self, positions_world: np.ndarray, exact_sum: bool = True) -> np.ndarray:
+        """η (Eq. 21) of B teams at once, one vectorised pass over all their disks.
+
+        Args:
+            positions_world: ``(B, N, 2)`` world positions ``[x m, y m]``, copy-major.
+            exact_sum: True (the default, evaluation and the envs): each copy's weights
+                are summed with one ``np.dot`` per copy, the same summation as
+                :meth:`eta`, so copy ``b`` equals ``eta(positions_world[b])`` bit for
+                bit; this keeps one short Python loop over copies. False: one
+                segmented sum for all copies (``np.add.reduceat``), no loop; it differs
+                from the exact sum only by round-off in the order of summation
+                (measured: ≤ 4.5e-16 absolute over 20 000 random teams, see
+                ``tests/test_metrics.py``), and is meant for training rewards.
+
+        Returns:
+            ``(B,)`` float64 η in ``[0, 1]``.
+
+        Raises:
+            ValueError: wrong shape, NaN or inf.
+        """
+        p = np.asarray(positions_world, dtype=np.float64)
+        if p.ndim != 3 or p.shape[2] != 2:
+            raise ValueError(
+                f"positions_world must have shape (B, N, 2) [x m, y m], got shape {p.shape}"
+            )
+        if not np.all(np.isfinite(p)):
+            raise ValueError("positions_world must be finite, got NaN or inf")
+        if exact_sum not in (True, False):
+            raise ValueError(f"exact_sum must be True or False, got {exact_sum!r}")
+        if p.shape[1] == 0:
+            return np.zeros(p.shape[0])
+        return self._eta_batch(p, exact_sum=bool(exact_sum))
+
+    def _eta_batch(self, p: np.ndarray, exact_sum: bool) -> np.ndarray:
+        """:meth:`eta_batch` on validated ``(B, N, 2)`` positions with N ≥ 1."""
+        B = p.shape[0]
+        out = np.zeros(B)
         n, h, c = self.n_cells, self.cell_m, self.centres_m
         R, r2 = self.sensing_radius_m, self._r2
         # Disks farther than R outside the arena stay outside after this clip; it only
         # keeps the integer cell indices below from overflowing for huge coordinates.
         p = np.clip(p, -R - 2.0 * h, self.arena_size_m + R + 2.0 * h)
-        x, y = p[:, 0:1], p[:, 1:2]  # (N, 1)
-        # Candidate rows of each disk: (N, m).
+        x, y = p[..., 0:1], p[..., 1:2]  # (B, N, 1)
+        # Candidate rows of each disk: (B, N, m).
         k0 = np.ceil((y - R) / h - 0.5).astype(np.int64) - 1
         rows = np.maximum(k0, 0) + self._row_offsets
         rows_c = np.minimum(rows, n - 1)
@@ -192,7 +234,8 @@ class CoverageMetric:
         dy2 = dy * dy
         valid = (rows < n) & (dy2 <= r2)
         if not valid.any():
-            return 0.0
+            return out
+        copy = np.broadcast_to(np.arange(B)[:, None, None], valid.shape)[valid]
         rows, dy2 = rows[valid], dy2[valid]
         xr = np.broadcast_to(x, valid.shape)[valid]
         half = np.sqrt(r2 - dy2)
@@ -212,26 +255,34 @@ class CoverageMetric:
             s[k], e[k] = self._exact_run_ends(s[k], e[k], xr[k], dy2[k])
         keep = e > s
         if not keep.any():
-            return 0.0
-        rows, s, e = rows[keep], s[keep], e[keep]
-        # Union of runs per row: sort by (row, s) with one integer key, then clip each
-        # run's start against the running maximum of the previous ends of its row.
+            return out
+        copy, rows, s, e = copy[keep], rows[keep], s[keep], e[keep]
+        # Union of runs per (copy, row): sort by (copy, row, s) with one integer key, then
+        # clip each run's start against the running maximum of the previous ends; ends of
+        # earlier groups are below the group's base, so groups never interact.
         stride = n + 2
-        ks = rows * stride + s
+        base = (copy * n + rows) * stride
+        ks = base + s
         order = np.argsort(ks, kind="stable")
-        ks, ke, rows = ks[order], (rows * stride + e)[order], rows[order]
+        ks, ke, base = ks[order], (base + e)[order], base[order]
+        copy, rows = copy[order], rows[order]
         prev_end = np.empty_like(ke)
         prev_end[0] = -1
         np.maximum.accumulate(ke[:-1], out=prev_end[1:])
         start = np.maximum(ks, prev_end)
-        base = rows * stride
         run = np.where(
             ke > start, self._cum_wx[ke - base] - self._cum_wx[np.minimum(start, ke) - base], 0.0
         )
-        total = float(np.dot(self._wy[rows], run))
-        return min(max(total, 0.0), 1.0)
-
-    __call__ = eta
+        wy = self._wy[rows]
+        bounds = np.searchsorted(copy, np.arange(B + 1))
+        if exact_sum:
+            for b in range(B):  # np.dot per copy: the summation order of eta()
+                lo, hi = bounds[b], bounds[b + 1]
+                out[b] = np.dot(wy[lo:hi], run[lo:hi])
+        else:
+            has = bounds[1:] > bounds[:-1]
+            out[has] = np.add.reduceat(wy * run, bounds[:-1][has])
+        return np.minimum(np.maximum(out, 0.0), 1.0)
 
     def _exact_run_ends(
         self, s: np.ndarray, e: np.ndarray, xr: np.ndarray, dy2: np.ndarray
@@ -323,6 +374,18 @@ def pairwise_distances(positions_world: np.ndarray) -> np.ndarray:
     p = _positions(positions_world)
     d = p[:, None, :] - p[None, :, :]
     return np.sqrt(np.einsum("ijk,ijk->ij", d, d))
+
+
+def pairwise_distances_batch(positions_world: np.ndarray) -> np.ndarray:
+    """``(..., N, N)`` centre distances (m) of ``(..., N, 2)`` positions; diagonals 0.
+
+    The batched form of :func:`pairwise_distances` (same arithmetic, so each ``[b]`` is
+    bit-identical to ``pairwise_distances(positions_world[b])``); not validated, for the
+    env's hot path.
+    """
+    p = np.asarray(positions_world, dtype=np.float64)
+    d = p[..., :, None, :] - p[..., None, :, :]
+    return np.sqrt(np.einsum("...ijk,...ijk->...ij", d, d))
 
 
 def min_pairwise_distance(positions_world: np.ndarray) -> float:
