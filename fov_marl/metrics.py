@@ -55,6 +55,7 @@ from fov_marl.config import ScenarioConfig
 
 __all__ = [
     "CoverageMetric",
+    "StripCoverageMetric",
     "coverage_efficiency_reference",
     "gaussian_mass_in_arena",
     "eta_single_disk_at_mean",
@@ -366,6 +367,124 @@ def eta_single_disk_at_mean(config: ScenarioConfig) -> float:
             f"lie inside the arena [0, {L}]^2 for the closed form"
         )
     return (1.0 - math.exp(-(R * R) / (2.0 * sigma * sigma))) / gaussian_mass_in_arena(config)
+
+
+# --------------------------------------------------------------------------- cheaper η
+class StripCoverageMetric:
+    """A cheaper η (Eq. 21) for training rewards: strips in y, exact Gaussian mass in x.
+
+    The arena is cut into ``n_y = ceil(L / row_m)`` horizontal strips. In each strip
+    a disk is replaced by its strip-averaged chord: centred on the disk's x, of width
+    (disk area inside the strip) / (strip height), so an isolated disk keeps its exact
+    area, caps included. The union of the chords of all disks in a strip is taken on
+    their x intervals, the density's x-factor is integrated over that union exactly
+    with the normal CDF (``scipy.special.ndtr``), and the strip is weighted by the
+    y-factor at its centre. No column grid: per call ``O(B · N · 2R_s/row_m)`` runs
+    (at the default 0.4 m strips, 4× fewer than the 0.1 m grid of
+    :class:`CoverageMetric`), fully vectorised over copies. Unlike the cell grid it is
+    a continuous function of the positions (chord ends move smoothly), which suits
+    rewards that are differences of η between steps. Measured in one batched env step
+    (B = 64, N = 6): 3.1 ms against 8.0 ms for the exact grid; the vector env with it
+    steps ~3× faster (``fov-marl bench``).
+
+    It is not the evaluation metric: the envs' ``metrics["eta"]`` (unless a vector env
+    is built with ``eta_method="strip"``) and everything in :mod:`fov_marl.evaluation`
+    use :class:`CoverageMetric`. Measured error at the paper's defaults (L = 40 m,
+    R_s = 6 m, σ = 10 m, 0.4 m strips), 4 000 random teams of N = 1-24 robots uniform in
+    the arena: against :class:`CoverageMetric` at most 4.0e-3 absolute in η (median
+    1.3e-4), and at most 3.6e-3 (median 1.4e-4) in the per-step gain η_t − η_{t−1}
+    over 0.2 m moves; against the exact continuous η (:func:`union_eta_continuous`,
+    320 teams) at most 2.2e-3 (median 8.5e-5), where the 0.1 m grid itself is off by
+    at most 9.2e-4 (median 9.1e-5). Errors grow with overlaps of disks inside a strip
+    (N = 1: at most 6e-4). ``tests/test_metrics.py`` checks these bounds.
+
+    Args:
+        config: the scenario (arena, R_s, density).
+        row_m: strip height (m), > 0; the actual one is ``L / ceil(L / row_m)``.
+    """
+
+    def __init__(self, config: ScenarioConfig | None = None, row_m: float = 0.4) -> None:
+        from scipy.special import ndtr
+
+        cfg = ScenarioConfig() if config is None else config
+        self._ndtr = ndtr
+        self.arena_size_m = float(cfg.arena_size_m)
+        self.sensing_radius_m = float(cfg.sensing_radius_m)
+        self.row_centres_m, self.row_m = grid_centres(self.arena_size_m, float(row_m))
+        self.n_rows = self.row_centres_m.size
+        mx, my = (float(v) for v in cfg.density_mean_m)
+        self._sigma = float(cfg.density_sigma_m)
+        self._mx = mx
+        gy = _axis_weights(self.row_centres_m, my, self._sigma)
+        self._wy = gy / gy.sum()
+        self._phi0 = float(ndtr((0.0 - mx) / self._sigma))
+        self._zx = float(ndtr((self.arena_size_m - mx) / self._sigma)) - self._phi0
+        R = self.sensing_radius_m
+        self._r2 = R * R
+        self._row_offsets = np.arange(math.floor(2.0 * R / self.row_m) + 4)
+
+    def _half_area(self, u: np.ndarray) -> np.ndarray:
+        """``∫₀ᵘ sqrt(R² − t²) dt`` for ``|u| ≤ R`` (half the disk area below height u)."""
+        R = self.sensing_radius_m
+        return 0.5 * (u * np.sqrt(np.maximum(self._r2 - u * u, 0.0)) + self._r2 * np.arcsin(u / R))
+
+    def eta_batch(self, positions_world: np.ndarray) -> np.ndarray:
+        """``(B,)`` η of ``(B, N, 2)`` world positions (m), in ``[0, 1]``.
+
+        Raises:
+            ValueError: wrong shape, NaN or inf.
+        """
+        p = np.asarray(positions_world, dtype=np.float64)
+        if p.ndim != 3 or p.shape[2] != 2:
+            raise ValueError(
+                f"positions_world must have shape (B, N, 2) [x m, y m], got shape {p.shape}"
+            )
+        if not np.all(np.isfinite(p)):
+            raise ValueError("positions_world must be finite, got NaN or inf")
+        return self._eta_batch(p)
+
+    def _eta_batch(self, p: np.ndarray) -> np.ndarray:
+        B = p.shape[0]
+        out = np.zeros(B)
+        if p.shape[1] == 0:
+            return out
+        n, h, L = self.n_rows, self.row_m, self.arena_size_m
+        R = self.sensing_radius_m
+        p = np.clip(p, -R - 2.0 * h, L + R + 2.0 * h)
+        x, y = p[..., 0:1], p[..., 1:2]
+        k0 = np.ceil((y - R) / h - 0.5).astype(np.int64) - 1
+        rows = np.maximum(k0, 0) + self._row_offsets
+        dy = self.row_centres_m[np.minimum(rows, n - 1)] - y
+        valid = (rows < n) & (np.abs(dy) < R + 0.5 * h)
+        # strip-averaged half-width of the disk: area of the disk inside the strip / 2h
+        u0 = np.clip(dy[valid] - 0.5 * h, -R, R)
+        u1 = np.clip(dy[valid] + 0.5 * h, -R, R)
+        half = (self._half_area(u1) - self._half_area(u0)) / h
+        xr = np.broadcast_to(x, valid.shape)[valid]
+        a = np.clip(xr - half, 0.0, L)
+        b = np.clip(xr + half, 0.0, L)
+        group = (np.broadcast_to(np.arange(B)[:, None, None] * n, valid.shape) + rows)[valid]
+        keep = b > a
+        if not keep.any():
+            return out
+        group, a, b = group[keep], a[keep], b[keep]
+        # union of chords per (copy, strip): sort by (group, start) with one float key
+        # (offsets of width 2L keep groups apart; round-off ~1e-9 m at B·n_y = 4e5),
+        # clip each start against the running maximum of the previous ends.
+        off = group * (2.0 * L + 1.0)
+        order = np.argsort(off + a)
+        off, a, b, group = off[order], a[order], b[order], group[order]
+        end = off + b
+        prev = np.empty_like(end)
+        prev[0] = -np.inf
+        np.maximum.accumulate(end[:-1], out=prev[1:])
+        start = np.maximum(off + a, prev) - off
+        s = self._sigma
+        mass = np.where(
+            b > start, self._ndtr((b - self._mx) / s) - self._ndtr((start - self._mx) / s), 0.0
+        )
+        out = np.bincount(group // n, weights=self._wy[group % n] * mass, minlength=B)
+        return np.minimum(np.maximum(out / self._zx, 0.0), 1.0)
 
 
 # --------------------------------------------------------------------------- separation

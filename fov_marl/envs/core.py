@@ -21,6 +21,7 @@ and one ``np.dot`` per copy in the exact η (see :meth:`CoverageMetric.eta_batch
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -29,7 +30,7 @@ import numpy as np
 from fov_marl.config import ScenarioConfig
 from fov_marl.envs.world import Camera, crossing_layout, sample_initial_poses, step_poses
 from fov_marl.geometry import world_to_body
-from fov_marl.metrics import CoverageMetric, pairwise_distances_batch
+from fov_marl.metrics import CoverageMetric, StripCoverageMetric, pairwise_distances_batch
 from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, action_to_velocity
 from fov_marl.validation import ConfigError
 
@@ -315,9 +316,23 @@ class CoverageCore(BatchedCore):
         "eta",
     )
 
-    def __init__(self, config: ScenarioConfig, num_envs: int) -> None:
+    #: η methods: ``"exact"`` (the 0.1 m grid quadrature of :class:`CoverageMetric`,
+    #: the evaluation metric) or ``"strip"`` (:class:`StripCoverageMetric`, cheaper, for
+    #: training rewards).
+    ETA_METHODS = ("exact", "strip")
+
+    def __init__(self, config: ScenarioConfig, num_envs: int, eta_method: str = "exact") -> None:
         super().__init__(config, num_envs)
+        if eta_method not in self.ETA_METHODS:
+            raise ValueError(
+                f"eta_method must be one of {list(self.ETA_METHODS)}, got {eta_method!r}"
+            )
+        self.eta_method = eta_method
         self.cov_metric = CoverageMetric(config)
+        if eta_method == "strip":
+            self._eta = StripCoverageMetric(config)._eta_batch
+        else:
+            self._eta = functools.partial(self.cov_metric._eta_batch, exact_sum=True)
         self._eta_prev = np.zeros(self.num_envs)
         self._goal = np.broadcast_to(np.asarray(config.density_mean_m, dtype=np.float64), (2,))
 
@@ -345,7 +360,7 @@ class CoverageCore(BatchedCore):
         self, idx: Any, col_i: np.ndarray, viol_i: np.ndarray, metrics: dict, reset: bool
     ) -> tuple[np.ndarray, np.ndarray]:
         cfg = self.config
-        eta = self.cov_metric.eta_batch(self.poses[idx, :, :2])
+        eta = self._eta(self.poses[idx, :, :2])
         metrics["eta"] = eta
         b = eta.shape[0]
         if reset:

@@ -158,11 +158,14 @@ def env(render_mode: str | None = None, **config: Any):
     return parallel_to_aec(parallel_env(render_mode=render_mode, **config))
 
 
-def vector_env(num_envs: int = 1, **config: Any) -> FovVectorEnv:
+def vector_env(num_envs: int = 1, eta_method: str = "exact", **config: Any) -> FovVectorEnv:
     """``num_envs`` copies stepped together over arrays (see :mod:`fov_marl.envs.vector`).
 
     Copy k after ``reset(seed=s)`` is bit-identical to ``parallel_env(**config)`` after
     ``reset(seed=s + k)`` under the same actions; finished copies reset automatically
     in the same step. Keywords are :class:`~fov_marl.config.ScenarioConfig` fields.
+    ``eta_method="strip"`` swaps the η of ``metrics["eta"]`` and of the reward for the
+    ~3× cheaper :class:`~fov_marl.metrics.StripCoverageMetric` (training; its error is
+    documented there); the default ``"exact"`` is the ParallelEnv's η.
     """
-    return FovVectorEnv(num_envs, "coverage", "fov_coverage_v0", config)
+    return FovVectorEnv(num_envs, "coverage", "fov_coverage_v0", config, eta_method=eta_method)

@@ -84,6 +84,11 @@ class FovVectorEnv:
         scenario: ``"coverage"`` or ``"crossing"``.
         name: the env name (``"fov_coverage_v0"``), for messages and ``metadata``.
         config_kwargs: :class:`~fov_marl.config.ScenarioConfig` fields.
+        config: instead of ``config_kwargs``, an already validated config.
+        eta_method: coverage only: ``"exact"`` (default; the ParallelEnv's η, so copies
+            are bit-identical to it) or ``"strip"`` (the cheaper
+            :class:`~fov_marl.metrics.StripCoverageMetric` for ``metrics["eta"]`` and the
+            reward; copies then differ from the ParallelEnv by its documented error).
 
     Raises:
         ValueError: bad ``num_envs`` or config (naming the field).
@@ -99,6 +104,7 @@ class FovVectorEnv:
         config_kwargs: Mapping[str, Any] | None = None,
         *,
         config: ScenarioConfig | None = None,
+        eta_method: str = "exact",
     ) -> None:
         from fov_marl.envs.base import scenario_config
 
@@ -115,7 +121,16 @@ class FovVectorEnv:
         self.n_agents = N = config.n_agents
         self.max_cycles = config.max_cycles
         self.possible_agents = [f"robot_{i}" for i in range(N)]
-        self._core: BatchedCore = CORES[scenario](config, num_envs=B)
+        if scenario == "coverage":
+            self._core: BatchedCore = CORES[scenario](config, num_envs=B, eta_method=eta_method)
+        elif eta_method != "exact":
+            raise ValueError(
+                f"eta_method applies to the coverage scenario only; {name} takes 'exact', "
+                f"got {eta_method!r}"
+            )
+        else:
+            self._core = CORES[scenario](config, num_envs=B)
+        self.eta_method = eta_method
         core = self._core
         self.single_observation_space = gymnasium.spaces.Box(
             core.obs_low, core.obs_high, dtype=np.float32
@@ -131,12 +146,14 @@ class FovVectorEnv:
         self._needs_reset = True
 
     @classmethod
-    def from_config(cls, config: ScenarioConfig, num_envs: int) -> FovVectorEnv:
+    def from_config(
+        cls, config: ScenarioConfig, num_envs: int, eta_method: str = "exact"
+    ) -> FovVectorEnv:
         """A vector env of an existing (validated) scenario config."""
         if not isinstance(config, ScenarioConfig):
             raise ValueError(f"config must be a ScenarioConfig, got {describe(config)}")
         name = f"fov_{config.scenario}_v0"
-        return cls(num_envs, config.scenario, name, config=config)
+        return cls(num_envs, config.scenario, name, config=config, eta_method=eta_method)
 
     # ------------------------------------------------------------- episode
     def reset(

@@ -286,3 +286,32 @@ def test_unseeded_reset_continues_the_generator_exactly(steps):
     expected = sample_initial_poses(env.config, rng)
     np.testing.assert_array_equal(env.poses, expected)
     np.testing.assert_array_equal(venv.poses[1], expected)
+
+
+def test_strip_eta_method_changes_only_eta_and_the_reward():
+    from fov_marl.metrics import StripCoverageMetric
+
+    cfg = dict(n_agents=4, max_cycles=50, collision_penalty=0.0, safety_penalty=0.0)
+    fast = fov_coverage_v0.vector_env(num_envs=2, eta_method="strip", **cfg)
+    exact = fov_coverage_v0.vector_env(num_envs=2, **cfg)
+    strip = StripCoverageMetric(fast.config)
+    o1, i1 = fast.reset(seed=2)
+    o2, i2 = exact.reset(seed=2)
+    np.testing.assert_array_equal(o1, o2)
+    eta_prev = i1["metrics"]["eta"]
+    np.testing.assert_array_equal(eta_prev, strip.eta_batch(fast.poses[..., :2]))
+    acts = _actions(np.random.default_rng(0), 10, 2, 4)
+    for t in range(10):
+        o1, r1, *_, i1 = fast.step(acts[t])
+        o2, r2, *_, i2 = exact.step(acts[t])
+        np.testing.assert_array_equal(o1, o2)  # same dynamics and camera stream
+        eta = strip.eta_batch(fast.poses[..., :2])
+        np.testing.assert_array_equal(i1["metrics"]["eta"], eta)
+        assert np.abs(eta - i2["metrics"]["eta"]).max() < 4e-3
+        want = np.float32(100.0 * (eta - eta_prev))[:, None]
+        np.testing.assert_array_equal(r1, np.broadcast_to(want, r1.shape))
+        eta_prev = eta
+    with pytest.raises(ValueError, match="eta_method must be one of"):
+        fov_coverage_v0.vector_env(num_envs=2, eta_method="coarse")
+    with pytest.raises(ValueError, match="eta_method"):
+        fov_crossing_v0.FovVectorEnv.from_config(fov_crossing_v0.parallel_env().config, 2, "strip")
