@@ -95,6 +95,8 @@ class FovVectorEnv:
     """
 
     metadata: dict[str, Any] = {"render_modes": [], "autoreset_mode": "SameStep"}
+    #: The vector env does not render (use a ParallelEnv for frames).
+    render_mode: str | None = None
 
     def __init__(
         self,
