@@ -3,7 +3,8 @@ limited-FoV camera and no communication (paper Section VII-D, Fig. 7).
 
 ============================  ==============================================================
 Import                        ``from fov_marl.envs import fov_crossing_v0``
-API                           PettingZoo ``ParallelEnv`` (``parallel_env``), AEC (``env``)
+API                           PettingZoo ``ParallelEnv`` (``parallel_env``), AEC (``env``),
+                              B copies over arrays (``vector_env``, :mod:`fov_marl.envs.vector`)
 Agents                        ``robot_0 … robot_{N−1}``, N = ``n_agents`` (default 4)
 Action space                  ``Box(-1, 1, (3,), float32)`` per agent
 Observation space             ``Box(low, high, (5 (N − 1) + 7,), float32)`` per agent
