@@ -236,7 +236,6 @@ class CoverageMetric:
         valid = (rows < n) & (dy2 <= r2)
         if not valid.any():
             return out
-        copy = np.broadcast_to(np.arange(B)[:, None, None], valid.shape)[valid]
         rows, dy2 = rows[valid], dy2[valid]
         xr = np.broadcast_to(x, valid.shape)[valid]
         half = np.sqrt(r2 - dy2)
@@ -257,16 +256,18 @@ class CoverageMetric:
         keep = e > s
         if not keep.any():
             return out
-        copy, rows, s, e = copy[keep], rows[keep], s[keep], e[keep]
+        rows, s, e = rows[keep], s[keep], e[keep]
+        # copy index of each run (B = 1, the ParallelEnv: none needed)
+        copy = None if B == 1 else np.repeat(np.arange(B), valid.sum(axis=(1, 2)))[keep]
         # Union of runs per (copy, row): sort by (copy, row, s) with one integer key, then
         # clip each run's start against the running maximum of the previous ends; ends of
         # earlier groups are below the group's base, so groups never interact.
         stride = n + 2
-        base = (copy * n + rows) * stride
+        base = (rows if copy is None else copy * n + rows) * stride
         ks = base + s
         order = np.argsort(ks, kind="stable")
         ks, ke, base = ks[order], (base + e)[order], base[order]
-        copy, rows = copy[order], rows[order]
+        rows = rows[order]
         prev_end = np.empty_like(ke)
         prev_end[0] = -1
         np.maximum.accumulate(ke[:-1], out=prev_end[1:])
@@ -275,7 +276,10 @@ class CoverageMetric:
             ke > start, self._cum_wx[ke - base] - self._cum_wx[np.minimum(start, ke) - base], 0.0
         )
         wy = self._wy[rows]
-        bounds = np.searchsorted(copy, np.arange(B + 1))
+        if copy is None:
+            out[0] = np.dot(wy, run)
+            return np.minimum(np.maximum(out, 0.0), 1.0)
+        bounds = np.searchsorted(copy[order], np.arange(B + 1))
         if exact_sum:
             for b in range(B):  # np.dot per copy: the summation order of eta()
                 lo, hi = bounds[b], bounds[b + 1]

@@ -48,10 +48,7 @@ def scenario_config(scenario: str, name: str, config_kwargs: dict[str, Any]) -> 
 
 def metrics_row(metrics: dict[str, np.ndarray], k: int) -> dict[str, Any]:
     """Copy ``k`` of batched metrics as Python scalars (int for integer arrays, else float)."""
-    return {
-        key: (int(v[k]) if np.issubdtype(v.dtype, np.integer) else float(v[k]))
-        for key, v in metrics.items()
-    }
+    return {key: v.item(k) for key, v in metrics.items()}
 
 
 class FovEnvBase(ParallelEnv):

@@ -237,8 +237,10 @@ class BatchedCore:
     def _take_noise(self, idx: Any) -> np.ndarray:
         """``(b, N, N, 3)`` clipped standard normals of the next observation of ``idx``."""
         ks = self._all[idx]
-        for k in ks[self._noise_pos[ks] >= self._chunk].tolist():
-            self._refill_noise(k)
+        empty = self._noise_pos[ks] >= self._chunk
+        if empty.any():
+            for k in ks[empty].tolist():
+                self._refill_noise(k)
         pos = self._noise_pos[ks]
         noise = self._noise[ks, pos]
         self._noise_pos[ks] = pos + 1
