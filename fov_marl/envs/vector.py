@@ -64,6 +64,7 @@ import gymnasium
 import numpy as np
 
 from fov_marl.config import ScenarioConfig
+from fov_marl.envs.base import scenario_config
 from fov_marl.envs.core import CORES, BatchedCore
 from fov_marl.validation import check_seed, describe
 
@@ -108,8 +109,6 @@ class FovVectorEnv:
         config: ScenarioConfig | None = None,
         eta_method: str = "exact",
     ) -> None:
-        from fov_marl.envs.base import scenario_config
-
         B = _check_num_envs(num_envs)
         if scenario not in CORES:
             raise ValueError(f"scenario must be one of {sorted(CORES)}, got {describe(scenario)}")
