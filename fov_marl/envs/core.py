@@ -16,7 +16,9 @@ or not), the generator is rewound to where the unbuffered draws would have left 
 (its state is restored and exactly the consumed normals are drawn again), so a reset
 without a seed continues the stream exactly as one draw per step would. The only
 per-copy Python work on the step path is that refill (once every ``K`` steps per copy)
-and one ``np.dot`` per copy in the exact η (see :meth:`CoverageMetric.eta_batch`).
+and one ``np.dot`` per copy in the exact η (see :meth:`CoverageMetric.eta_batch`);
+resets draw each copy's start poses in a loop over the copies being reset (the
+dart throwing of :func:`~fov_marl.envs.world.sample_initial_poses` is per team).
 """
 
 from __future__ import annotations

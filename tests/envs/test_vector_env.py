@@ -315,3 +315,26 @@ def test_strip_eta_method_changes_only_eta_and_the_reward():
         fov_coverage_v0.vector_env(num_envs=2, eta_method="coarse")
     with pytest.raises(ValueError, match="eta_method"):
         fov_crossing_v0.FovVectorEnv.from_config(fov_crossing_v0.parallel_env().config, 2, "strip")
+
+
+def test_batched_camera_pieces_equal_the_single_ones():
+    from fov_marl.envs.world import Camera
+    from fov_marl.geometry import relative_pose, relative_pose_batch
+
+    cfg = fov_coverage_v0.parallel_env(n_agents=7, fov_deg=100.0).config
+    cam = Camera(cfg)
+    rng = np.random.default_rng(4)
+    poses = np.concatenate([rng.uniform(0, 40, (5, 7, 2)), rng.uniform(-4, 4, (5, 7, 1))], -1)
+    rel_b, det_b = cam.detect_batch(poses)
+    rel_all = relative_pose_batch(poses)
+    noise = np.clip(rng.standard_normal((5, 7, 7, 3)), -5, 5)
+    blocks = cam.neighbour_blocks_from_noise(poses, noise)
+    assert blocks.shape == (5, 7, 6, 5) and det_b.any() and not det_b.all()
+    for b in range(5):
+        rel, det = cam.detect(poses[b])
+        np.testing.assert_array_equal(rel_b[b], rel)
+        np.testing.assert_array_equal(rel_all[b], relative_pose(poses[b]))
+        np.testing.assert_array_equal(det_b[b], det)
+        np.testing.assert_array_equal(
+            blocks[b], cam.neighbour_blocks_from_noise(poses[b], noise[b])
+        )
