@@ -272,15 +272,14 @@ class CoverageMetric:
         base = (rows if copy is None else copy * n + rows) * stride
         ks = base + s
         order = np.argsort(ks, kind="stable")
-        ks, ke, base = ks[order], (base + e)[order], base[order]
-        rows = rows[order]
+        ks, base, e, rows = ks[order], base[order], e[order], rows[order]
+        ke = base + e
         prev_end = np.empty_like(ke)
         prev_end[0] = -1
         np.maximum.accumulate(ke[:-1], out=prev_end[1:])
-        start = np.maximum(ks, prev_end)
-        run = np.where(
-            ke > start, self._cum_wx[ke - base] - self._cum_wx[np.minimum(start, ke) - base], 0.0
-        )
+        # start of the uncovered part of each run (its end e when earlier runs cover it)
+        start = np.minimum(np.maximum(ks, prev_end) - base, e)
+        run = self._cum_wx[e] - self._cum_wx[start]
         wy = self._wy[rows]
         if copy is None:
             out[0] = np.dot(wy, run)
