@@ -1,6 +1,9 @@
 """``fov-marl bench``: timings of every layer, per robot-step, across team sizes.
 
-Sections: ``env`` (raw env step rate, random actions, no rendering), ``tracker``
+Sections: ``env`` (raw env step rate, random actions, no rendering), ``vector_env``
+(the batched core: B copies per call, side by side with the single env of the same N
+in the same run, and the ratio; optionally ``vmas``, VMAS simple_spread on CPU when
+``vmas`` is importable), ``tracker``
 (particle-filter bank), ``control`` (Lloyd, cascade, final QP) and ``controller``
 (the full pfcbf policy step: tracker + Lloyd + cascade + final QP). Every number
 the closing notes quote comes from here. Timings are wall-clock medians over
@@ -15,9 +18,21 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["bench_env", "bench_controller", "run_benchmarks"]
+__all__ = [
+    "bench_env",
+    "bench_vector_env",
+    "bench_vmas",
+    "bench_controller",
+    "run_benchmarks",
+]
 
 DEFAULT_N = (6, 9, 12, 24, 48)
+#: (N, batch sizes) of the vector-env section (issue 12's acceptance figures).
+VECTOR_CASES: tuple[tuple[int, tuple[int, ...]], ...] = (
+    (6, (1, 64, 256)),
+    (24, (64,)),
+    (100, (64,)),
+)
 
 
 def bench_env(n_agents: Sequence[int] = (6, 48), steps: int = 300) -> list[dict[str, Any]]:
@@ -44,6 +59,128 @@ def bench_env(n_agents: Sequence[int] = (6, 48), steps: int = 300) -> list[dict[
                 "ms_per_env_step": 1e3 * el / steps,
             }
         )
+    return rows
+
+
+def _single_env_rate(n: int, steps: int, repeats: int) -> float:
+    """Env-steps/s of one coverage ParallelEnv (best of ``repeats``), random actions."""
+    from fov_marl.envs import fov_coverage_v0
+
+    env = fov_coverage_v0.parallel_env(n_agents=n, max_cycles=10**9)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    acts = rng.uniform(-1, 1, (steps, n, 3)).astype(np.float32)
+    names = env.possible_agents
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for k in range(steps):
+            env.step(dict(zip(names, acts[k], strict=True)))
+        best = min(best, time.perf_counter() - t0)
+    return steps / best
+
+
+def _vector_env_rate(n: int, num_envs: int, env_steps: int, repeats: int, eta_method: str) -> float:
+    """Env-steps/s (copies × steps per second) of a coverage vector env, best of ``repeats``."""
+    from fov_marl.envs import fov_coverage_v0
+
+    venv = fov_coverage_v0.vector_env(
+        num_envs=num_envs, n_agents=n, max_cycles=10**9, eta_method=eta_method
+    )
+    venv.reset(seed=0)
+    steps = max(3, env_steps // num_envs)
+    rng = np.random.default_rng(0)
+    acts = rng.uniform(-1, 1, (min(steps, 8), num_envs, n, 3)).astype(np.float32)
+    venv.step(acts[0])  # warm-up
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for k in range(steps):
+            venv.step(acts[k % acts.shape[0]])
+        best = min(best, time.perf_counter() - t0)
+    return steps * num_envs / best
+
+
+def bench_vector_env(
+    cases: Sequence[tuple[int, Sequence[int]]] = VECTOR_CASES,
+    quick: bool = False,
+    eta_methods: Sequence[str] = ("exact", "strip"),
+) -> list[dict[str, Any]]:
+    """Batched coverage env against one env of the same N, measured side by side.
+
+    For each N the single ParallelEnv is timed right before its vector envs (best of
+    3 repetitions each, random actions, no rendering, the machine's load shared
+    alike); ``ratio`` is the vector env's env-steps/s over the single env's.
+    ``eta_method="exact"`` is bit-identical to the ParallelEnv; ``"strip"`` uses the
+    cheaper training η (:class:`fov_marl.metrics.StripCoverageMetric`).
+    """
+    rows = []
+    reps = 2 if quick else 3
+    for n, batches in cases:
+        single_steps = max(10, (100 if quick else 300) * 6 // max(n, 6))
+        single = _single_env_rate(n, single_steps, reps)
+        budget = (1500 if quick else 6000) * 6 // max(n, 6)
+        for b in batches:
+            for method in eta_methods:
+                rate = _vector_env_rate(n, int(b), max(budget, b * 3), reps, method)
+                rows.append(
+                    {
+                        "section": "vector_env",
+                        "n_agents": n,
+                        "num_envs": int(b),
+                        "eta_method": method,
+                        "env_steps_per_s": rate,
+                        "single_env_steps_per_s": single,
+                        "ratio": rate / single,
+                    }
+                )
+    return rows
+
+
+def bench_vmas(
+    n_agents: int = 6, num_envs: Sequence[int] = (64, 256), steps: int = 100
+) -> list[dict[str, Any]]:
+    """VMAS simple_spread on CPU (one torch thread), if ``vmas`` imports; else no rows.
+
+    VMAS is not a dependency of fov_marl; install it (it needs ``gym``) to get these rows.
+    """
+    try:
+        import torch
+        import vmas
+    except Exception:  # noqa: BLE001 - vmas absent or its gym import fails
+        return []
+    prev = torch.get_num_threads()
+    torch.set_num_threads(1)
+    rows = []
+    try:
+        for b in num_envs:
+            env = vmas.make_env(
+                "simple_spread",
+                num_envs=int(b),
+                device="cpu",
+                continuous_actions=True,
+                n_agents=n_agents,
+                seed=0,
+            )
+            env.reset()
+            gen = torch.Generator().manual_seed(0)
+            acts = [torch.rand(int(b), 2, generator=gen) * 2 - 1 for _ in range(n_agents)]
+            env.step(acts)
+            t0 = time.perf_counter()
+            for _ in range(steps):
+                env.step(acts)
+            el = time.perf_counter() - t0
+            rows.append(
+                {
+                    "section": "vmas",
+                    "scenario": "simple_spread",
+                    "n_agents": n_agents,
+                    "num_envs": int(b),
+                    "env_steps_per_s": steps * int(b) / el,
+                }
+            )
+    finally:
+        torch.set_num_threads(prev)
     return rows
 
 
@@ -115,6 +252,11 @@ def run_benchmarks(
     """All sections; ``quick`` uses fewer repetitions."""
     ns = tuple(n_agents) if n_agents else DEFAULT_N
     rows = bench_env(n_agents=sorted({6, 48, *ns}), steps=100 if quick else 500)
+    # default run: the issue's figures (N = 6 at B = 1/64/256, N = 24 and 100 at B = 64);
+    # with explicit team sizes: those N at B = 64
+    cases = VECTOR_CASES if not n_agents else tuple((n, (64,)) for n in ns)
+    rows.extend(bench_vector_env(cases, quick=quick))
+    rows.extend(bench_vmas(steps=30 if quick else 100))
     try:
         from fov_marl.estimation.benchmark import bench_tracker
 
@@ -143,3 +285,11 @@ def run_benchmarks(
     except ValueError:  # pfcbf not registered
         pass
     return rows
+
+
+if __name__ == "__main__":  # the vector-env figures alone: python -m fov_marl.bench [--quick]
+    import sys
+
+    quick = "--quick" in sys.argv
+    for r in bench_vector_env(quick=quick) + bench_vmas(steps=30 if quick else 100):
+        print({k: (round(v, 2) if isinstance(v, float) else v) for k, v in r.items()})

@@ -22,6 +22,7 @@ __all__ = [
     "world_to_body",
     "body_to_world",
     "relative_pose",
+    "relative_pose_batch",
     "in_fov",
     "confidence_ellipse",
     "ellipse_distance",
@@ -318,3 +319,20 @@ def integrate_unicycle(
     out[..., 1] = poses_world[..., 1] + s * lx + c * ly
     out[..., 2] = wrap_angle(th + phi)
     return out
+
+
+def relative_pose_batch(poses_world: np.ndarray) -> np.ndarray:
+    """All pairwise relative poses of B teams at once (batched :func:`relative_pose`).
+
+    Args:
+        poses_world: ``(..., N, 3)`` world poses.
+
+    Returns:
+        ``(..., N, N, 3)``; entry ``[..., i, j]`` is ``[ⁱx_j m, ⁱy_j m, θ_j − θ_i rad]``,
+        the same arithmetic as :func:`relative_pose`, so each team's block is
+        bit-identical to ``relative_pose`` of that team.
+    """
+    poses_world = np.asarray(poses_world, dtype=np.float64)
+    p_body = world_to_body(poses_world[..., None, :, :2], poses_world[..., :, None, :])
+    dyaw = wrap_angle(poses_world[..., None, :, 2] - poses_world[..., :, None, 2])
+    return np.concatenate([p_body, dyaw[..., None]], -1)

@@ -55,11 +55,13 @@ from fov_marl.config import ScenarioConfig
 
 __all__ = [
     "CoverageMetric",
+    "StripCoverageMetric",
     "coverage_efficiency_reference",
     "gaussian_mass_in_arena",
     "eta_single_disk_at_mean",
     "grid_centres",
     "pairwise_distances",
+    "pairwise_distances_batch",
     "min_pairwise_distance",
     "collision_pairs",
     "safety_violations",
@@ -120,6 +122,12 @@ class CoverageMetric:
     N = 6, 86 µs for N = 12, 0.34 ms for N = 48, 1.9 ms for N = 200. The slow
     reference takes ~9 ms at N = 6.
 
+    :meth:`eta_batch` does B teams in one vectorised pass (the batched env core), bit
+    for bit equal to :meth:`eta` per team (which is its B = 1 case); its cost is then
+    the per-run arithmetic (~47 000 runs at B = 64, N = 6), not the per-call overhead,
+    so it gains 3-4× over B calls, and it dominates a batched env step (~80% at N = 6).
+    :class:`StripCoverageMetric` is the cheaper, continuous variant for training rewards.
+
     Args:
         config: the scenario; uses ``arena_size_m``, ``sensing_radius_m``,
             ``density_mean_m``, ``density_sigma_m`` and ``eta_grid_m``.
@@ -178,13 +186,54 @@ class CoverageMetric:
         p = _positions(positions_world)
         if p.shape[0] == 0:
             return 0.0
+        return float(self._eta_batch(p[None], exact_sum=True)[0])
+
+    __call__ = eta
+
+    def eta_batch(self, positions_world: np.ndarray, exact_sum: bool = True) -> np.ndarray:
+        """η (Eq. 21) of B teams at once, one vectorised pass over all their disks.
+
+        Args:
+            positions_world: ``(B, N, 2)`` world positions ``[x m, y m]``, copy-major.
+            exact_sum: True (the default, evaluation and the envs): each copy's weights
+                are summed with one ``np.dot`` per copy, the same summation as
+                :meth:`eta`, so copy ``b`` equals ``eta(positions_world[b])`` bit for
+                bit; this keeps one short Python loop over copies. False: one
+                segmented sum for all copies (``np.add.reduceat``), no loop; it differs
+                from the exact sum only by round-off in the order of summation
+                (measured: ≤ 4.5e-16 absolute over 20 000 random teams, see
+                ``tests/test_metrics.py``), and is meant for training rewards.
+
+        Returns:
+            ``(B,)`` float64 η in ``[0, 1]``.
+
+        Raises:
+            ValueError: wrong shape, NaN or inf.
+        """
+        p = np.asarray(positions_world, dtype=np.float64)
+        if p.ndim != 3 or p.shape[2] != 2:
+            raise ValueError(
+                f"positions_world must have shape (B, N, 2) [x m, y m], got shape {p.shape}"
+            )
+        if not np.all(np.isfinite(p)):
+            raise ValueError("positions_world must be finite, got NaN or inf")
+        if exact_sum not in (True, False):
+            raise ValueError(f"exact_sum must be True or False, got {exact_sum!r}")
+        if p.shape[1] == 0:
+            return np.zeros(p.shape[0])
+        return self._eta_batch(p, exact_sum=bool(exact_sum))
+
+    def _eta_batch(self, p: np.ndarray, exact_sum: bool) -> np.ndarray:
+        """:meth:`eta_batch` on validated ``(B, N, 2)`` positions with N ≥ 1."""
+        B = p.shape[0]
+        out = np.zeros(B)
         n, h, c = self.n_cells, self.cell_m, self.centres_m
         R, r2 = self.sensing_radius_m, self._r2
         # Disks farther than R outside the arena stay outside after this clip; it only
         # keeps the integer cell indices below from overflowing for huge coordinates.
         p = np.clip(p, -R - 2.0 * h, self.arena_size_m + R + 2.0 * h)
-        x, y = p[:, 0:1], p[:, 1:2]  # (N, 1)
-        # Candidate rows of each disk: (N, m).
+        x, y = p[..., 0:1], p[..., 1:2]  # (B, N, 1)
+        # Candidate rows of each disk: (B, N, m).
         k0 = np.ceil((y - R) / h - 0.5).astype(np.int64) - 1
         rows = np.maximum(k0, 0) + self._row_offsets
         rows_c = np.minimum(rows, n - 1)
@@ -192,7 +241,7 @@ class CoverageMetric:
         dy2 = dy * dy
         valid = (rows < n) & (dy2 <= r2)
         if not valid.any():
-            return 0.0
+            return out
         rows, dy2 = rows[valid], dy2[valid]
         xr = np.broadcast_to(x, valid.shape)[valid]
         half = np.sqrt(r2 - dy2)
@@ -212,26 +261,38 @@ class CoverageMetric:
             s[k], e[k] = self._exact_run_ends(s[k], e[k], xr[k], dy2[k])
         keep = e > s
         if not keep.any():
-            return 0.0
+            return out
         rows, s, e = rows[keep], s[keep], e[keep]
-        # Union of runs per row: sort by (row, s) with one integer key, then clip each
-        # run's start against the running maximum of the previous ends of its row.
+        # copy index of each run (B = 1, the ParallelEnv: none needed)
+        copy = None if B == 1 else np.repeat(np.arange(B), valid.sum(axis=(1, 2)))[keep]
+        # Union of runs per (copy, row): sort by (copy, row, s) with one integer key, then
+        # clip each run's start against the running maximum of the previous ends; ends of
+        # earlier groups are below the group's base, so groups never interact.
         stride = n + 2
-        ks = rows * stride + s
+        base = (rows if copy is None else copy * n + rows) * stride
+        ks = base + s
         order = np.argsort(ks, kind="stable")
-        ks, ke, rows = ks[order], (rows * stride + e)[order], rows[order]
+        ks, base, e, rows = ks[order], base[order], e[order], rows[order]
+        ke = base + e
         prev_end = np.empty_like(ke)
         prev_end[0] = -1
         np.maximum.accumulate(ke[:-1], out=prev_end[1:])
-        start = np.maximum(ks, prev_end)
-        base = rows * stride
-        run = np.where(
-            ke > start, self._cum_wx[ke - base] - self._cum_wx[np.minimum(start, ke) - base], 0.0
-        )
-        total = float(np.dot(self._wy[rows], run))
-        return min(max(total, 0.0), 1.0)
-
-    __call__ = eta
+        # start of the uncovered part of each run (its end e when earlier runs cover it)
+        start = np.minimum(np.maximum(ks, prev_end) - base, e)
+        run = self._cum_wx[e] - self._cum_wx[start]
+        wy = self._wy[rows]
+        if copy is None:
+            out[0] = np.dot(wy, run)
+            return np.minimum(np.maximum(out, 0.0), 1.0)
+        bounds = np.searchsorted(copy[order], np.arange(B + 1))
+        if exact_sum:
+            for b in range(B):  # np.dot per copy: the summation order of eta()
+                lo, hi = bounds[b], bounds[b + 1]
+                out[b] = np.dot(wy[lo:hi], run[lo:hi])
+        else:
+            has = bounds[1:] > bounds[:-1]
+            out[has] = np.add.reduceat(wy * run, bounds[:-1][has])
+        return np.minimum(np.maximum(out, 0.0), 1.0)
 
     def _exact_run_ends(
         self, s: np.ndarray, e: np.ndarray, xr: np.ndarray, dy2: np.ndarray
@@ -317,12 +378,143 @@ def eta_single_disk_at_mean(config: ScenarioConfig) -> float:
     return (1.0 - math.exp(-(R * R) / (2.0 * sigma * sigma))) / gaussian_mass_in_arena(config)
 
 
+# --------------------------------------------------------------------------- cheaper η
+class StripCoverageMetric:
+    """A cheaper η (Eq. 21) for training rewards: strips in y, exact Gaussian mass in x.
+
+    The arena is cut into ``n_y = ceil(L / row_m)`` horizontal strips. In each strip
+    a disk is replaced by its strip-averaged chord: centred on the disk's x, of width
+    (disk area inside the strip) / (strip height), so an isolated disk keeps its exact
+    area, caps included. The union of the chords of all disks in a strip is taken on
+    their x intervals, the density's x-factor is integrated over that union exactly
+    with the normal CDF (``scipy.special.ndtr``), and the strip is weighted by the
+    y-factor at its centre. No column grid: per call ``O(B · N · 2R_s/row_m)`` runs
+    (at the default 0.4 m strips, 4× fewer than the 0.1 m grid of
+    :class:`CoverageMetric`), fully vectorised over copies. Unlike the cell grid it is
+    a continuous function of the positions (chord ends move smoothly), which suits
+    rewards that are differences of η between steps. Measured (B = 64, N = 6, best of
+    40 calls on the shared 2-core machine): 1.25 ms against 3.9 ms for
+    :meth:`CoverageMetric.eta_batch`; the vector env with it steps 2.4-2.9× faster
+    (``fov-marl bench``, section ``vector_env``).
+
+    It is not the evaluation metric: the envs' ``metrics["eta"]`` (unless a vector env
+    is built with ``eta_method="strip"``) and everything in :mod:`fov_marl.evaluation`
+    use :class:`CoverageMetric`. Measured error at the paper's defaults (L = 40 m,
+    R_s = 6 m, σ = 10 m, 0.4 m strips), 4 000 random teams of N = 1-24 robots uniform in
+    the arena: against :class:`CoverageMetric` at most 4.0e-3 absolute in η (median
+    1.3e-4), and at most 3.6e-3 (median 1.4e-4) in the per-step gain η_t − η_{t−1}
+    over 0.2 m moves; against the exact continuous η (:func:`union_eta_continuous`,
+    320 teams) at most 2.2e-3 (median 8.5e-5), where the 0.1 m grid itself is off by
+    at most 9.2e-4 (median 9.1e-5). Errors grow with overlaps of disks inside a strip
+    (N = 1: at most 6e-4). ``tests/test_metrics.py`` checks these bounds.
+
+    Args:
+        config: the scenario (arena, R_s, density).
+        row_m: strip height (m), > 0; the actual one is ``L / ceil(L / row_m)``.
+    """
+
+    def __init__(self, config: ScenarioConfig | None = None, row_m: float = 0.4) -> None:
+        from scipy.special import ndtr
+
+        cfg = ScenarioConfig() if config is None else config
+        self._ndtr = ndtr
+        self.arena_size_m = float(cfg.arena_size_m)
+        self.sensing_radius_m = float(cfg.sensing_radius_m)
+        self.row_centres_m, self.row_m = grid_centres(self.arena_size_m, float(row_m))
+        self.n_rows = self.row_centres_m.size
+        mx, my = (float(v) for v in cfg.density_mean_m)
+        self._sigma = float(cfg.density_sigma_m)
+        self._mx = mx
+        gy = _axis_weights(self.row_centres_m, my, self._sigma)
+        self._wy = gy / gy.sum()
+        self._phi0 = float(ndtr((0.0 - mx) / self._sigma))
+        self._zx = float(ndtr((self.arena_size_m - mx) / self._sigma)) - self._phi0
+        R = self.sensing_radius_m
+        self._r2 = R * R
+        self._row_offsets = np.arange(math.floor(2.0 * R / self.row_m) + 4)
+
+    def _half_area(self, u: np.ndarray) -> np.ndarray:
+        """``∫₀ᵘ sqrt(R² − t²) dt`` for ``|u| ≤ R`` (half the disk area below height u)."""
+        R = self.sensing_radius_m
+        return 0.5 * (u * np.sqrt(np.maximum(self._r2 - u * u, 0.0)) + self._r2 * np.arcsin(u / R))
+
+    def eta_batch(self, positions_world: np.ndarray) -> np.ndarray:
+        """``(B,)`` η of ``(B, N, 2)`` world positions (m), in ``[0, 1]``.
+
+        Raises:
+            ValueError: wrong shape, NaN or inf.
+        """
+        p = np.asarray(positions_world, dtype=np.float64)
+        if p.ndim != 3 or p.shape[2] != 2:
+            raise ValueError(
+                f"positions_world must have shape (B, N, 2) [x m, y m], got shape {p.shape}"
+            )
+        if not np.all(np.isfinite(p)):
+            raise ValueError("positions_world must be finite, got NaN or inf")
+        return self._eta_batch(p)
+
+    def _eta_batch(self, p: np.ndarray) -> np.ndarray:
+        B = p.shape[0]
+        out = np.zeros(B)
+        if p.shape[1] == 0:
+            return out
+        n, h, L = self.n_rows, self.row_m, self.arena_size_m
+        R = self.sensing_radius_m
+        p = np.clip(p, -R - 2.0 * h, L + R + 2.0 * h)
+        x, y = p[..., 0:1], p[..., 1:2]
+        k0 = np.ceil((y - R) / h - 0.5).astype(np.int64) - 1
+        rows = np.maximum(k0, 0) + self._row_offsets
+        dy = self.row_centres_m[np.minimum(rows, n - 1)] - y
+        valid = (rows < n) & (np.abs(dy) < R + 0.5 * h)
+        # strip-averaged half-width of the disk: area of the disk inside the strip / 2h
+        u0 = np.clip(dy[valid] - 0.5 * h, -R, R)
+        u1 = np.clip(dy[valid] + 0.5 * h, -R, R)
+        half = (self._half_area(u1) - self._half_area(u0)) / h
+        xr = np.broadcast_to(x, valid.shape)[valid]
+        a = np.clip(xr - half, 0.0, L)
+        b = np.clip(xr + half, 0.0, L)
+        group = (np.broadcast_to(np.arange(B)[:, None, None] * n, valid.shape) + rows)[valid]
+        keep = b > a
+        if not keep.any():
+            return out
+        group, a, b = group[keep], a[keep], b[keep]
+        # union of chords per (copy, strip): sort by (group, start) with one float key
+        # (offsets of width 2L keep groups apart; round-off ~1e-9 m at B·n_y = 4e5),
+        # clip each start against the running maximum of the previous ends.
+        off = group * (2.0 * L + 1.0)
+        order = np.argsort(off + a)
+        off, a, b, group = off[order], a[order], b[order], group[order]
+        end = off + b
+        prev = np.empty_like(end)
+        prev[0] = -np.inf
+        np.maximum.accumulate(end[:-1], out=prev[1:])
+        start = np.maximum(off + a, prev) - off
+        s = self._sigma
+        mass = np.where(
+            b > start, self._ndtr((b - self._mx) / s) - self._ndtr((start - self._mx) / s), 0.0
+        )
+        out = np.bincount(group // n, weights=self._wy[group % n] * mass, minlength=B)
+        return np.minimum(np.maximum(out / self._zx, 0.0), 1.0)
+
+
 # --------------------------------------------------------------------------- separation
 def pairwise_distances(positions_world: np.ndarray) -> np.ndarray:
     """``(N, N)`` Euclidean centre distances (m) of ``(N, 2)`` positions; diagonal 0."""
     p = _positions(positions_world)
     d = p[:, None, :] - p[None, :, :]
     return np.sqrt(np.einsum("ijk,ijk->ij", d, d))
+
+
+def pairwise_distances_batch(positions_world: np.ndarray) -> np.ndarray:
+    """``(..., N, N)`` centre distances (m) of ``(..., N, 2)`` positions; diagonals 0.
+
+    The batched form of :func:`pairwise_distances` (same arithmetic, so each ``[b]`` is
+    bit-identical to ``pairwise_distances(positions_world[b])``); not validated, for the
+    env's hot path.
+    """
+    p = np.asarray(positions_world, dtype=np.float64)
+    d = p[..., :, None, :] - p[..., None, :, :]
+    return np.sqrt(np.einsum("...ijk,...ijk->...ij", d, d))
 
 
 def min_pairwise_distance(positions_world: np.ndarray) -> float:

@@ -1,8 +1,12 @@
-"""The shared PettingZoo ``ParallelEnv`` of the two scenarios.
+"""The shared PettingZoo ``ParallelEnv`` of the two scenarios: a B = 1 view of the core.
 
 The scenario modules (:mod:`fov_marl.envs.fov_coverage_v0`,
-:mod:`fov_marl.envs.fov_crossing_v0`) hold the user documentation; this module holds
-the machinery: config, spaces, seeding, stepping, metrics, rendering.
+:mod:`fov_marl.envs.fov_crossing_v0`) hold the user documentation; the dynamics,
+camera, rewards and metrics live once in the batched core
+(:mod:`fov_marl.envs.core`, arrays with a leading copy axis), which this class drives
+with one copy; :mod:`fov_marl.envs.vector` drives it with B copies. This module holds
+what is specific to the PettingZoo API: agent names, dict actions and observations,
+per-agent infos, ``max_cycles``, rendering.
 """
 
 from __future__ import annotations
@@ -15,19 +19,44 @@ import numpy as np
 from pettingzoo import ParallelEnv
 
 from fov_marl.config import ScenarioConfig, make_config
+from fov_marl.envs.core import CORES, BatchedCore
 from fov_marl.envs.rendering import HumanWindow, RenderLayer, render_frame
-from fov_marl.envs.world import Camera, step_poses
-from fov_marl.geometry import world_to_body
 from fov_marl.infos import agent_infos
-from fov_marl.metrics import CoverageMetric, pairwise_distances
-from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, ObservationLayout, action_to_velocity
+from fov_marl.spaces import ObservationLayout
 from fov_marl.validation import ConfigError, as_real_vector, check_seed, describe
 
-__all__ = ["FovEnvBase"]
+__all__ = ["FovEnvBase", "scenario_config"]
+
+
+def scenario_config(scenario: str, name: str, config_kwargs: dict[str, Any]) -> ScenarioConfig:
+    """The validated config of an env whose scenario is fixed (``name`` for messages).
+
+    ``scenario=`` among the keywords is accepted when it repeats the env's own scenario;
+    another value is a :class:`~fov_marl.validation.ConfigError`.
+    """
+    config_kwargs = dict(config_kwargs)
+    if "scenario" in config_kwargs:
+        # the env fixes its scenario: the same value is accepted, another is an error
+        given = config_kwargs.pop("scenario")
+        if not (isinstance(given, str) and given == scenario):
+            other = isinstance(given, str) and given in ("coverage", "crossing")
+            raise ConfigError(
+                f"scenario is fixed to {scenario!r} by {name}, got "
+                f"{describe(given)}" + (f"; use fov_{given}_v0 instead" if other else "")
+            )
+    return make_config(scenario=scenario, **config_kwargs)
+
+
+def metrics_row(metrics: dict[str, np.ndarray], k: int) -> dict[str, Any]:
+    """Copy ``k`` of batched metrics as Python scalars (int for integer arrays, else float)."""
+    return {key: v.item(k) for key, v in metrics.items()}
 
 
 class FovEnvBase(ParallelEnv):
-    """Common implementation; use the scenario modules' ``parallel_env``."""
+    """Common implementation; use the scenario modules' ``parallel_env``.
+
+    A view of a :class:`~fov_marl.envs.core.BatchedCore` with one copy.
+    """
 
     metadata: dict[str, Any] = {
         "render_modes": ["human", "rgb_array"],
@@ -43,16 +72,9 @@ class FovEnvBase(ParallelEnv):
             raise ValueError(
                 f"render_mode must be one of {[None, *modes]}, got {describe(render_mode)}"
             )
-        if "scenario" in config_kwargs:
-            # the env fixes its scenario: the same value is accepted, another is an error
-            given = config_kwargs.pop("scenario")
-            if not (isinstance(given, str) and given == self.scenario):
-                other = isinstance(given, str) and given in ("coverage", "crossing")
-                raise ConfigError(
-                    f"scenario is fixed to {self.scenario!r} by {self.metadata['name']}, got "
-                    f"{describe(given)}" + (f"; use fov_{given}_v0 instead" if other else "")
-                )
-        self.config: ScenarioConfig = make_config(scenario=self.scenario, **config_kwargs)
+        self.config: ScenarioConfig = scenario_config(
+            self.scenario, self.metadata["name"], config_kwargs
+        )
         cfg = self.config
         self.render_mode = render_mode
         self.max_cycles = cfg.max_cycles
@@ -61,20 +83,19 @@ class FovEnvBase(ParallelEnv):
         self.agent_name_mapping = {a: i for i, a in enumerate(self.possible_agents)}
         self.agents: list[str] = []
         self.layouts = [ObservationLayout(n, i) for i in range(n)]
-        self._camera = Camera(cfg)
-        self._obs_space = self._make_obs_space()
+        self._core: BatchedCore = CORES[self.scenario](cfg, num_envs=1)
+        self._obs_space = gymnasium.spaces.Box(
+            self._core.obs_low, self._core.obs_high, dtype=np.float32
+        )
         self._obs_spaces = {a: self._obs_space for a in self.possible_agents}
         self._act_spaces = {
             a: gymnasium.spaces.Box(-1.0, 1.0, (3,), np.float32) for a in self.possible_agents
         }
-        self.state_space = self._make_state_space()
-        self._rng: np.random.Generator | None = None
-        self._poses = np.zeros((n, 3))
-        self._targets: np.ndarray | None = None
+        self.state_space = gymnasium.spaces.Box(
+            self._core.state_low, self._core.state_high, dtype=np.float32
+        )
         self._layers: list[RenderLayer] = []
         self._window: HumanWindow | None = None
-        self._cov_metric = CoverageMetric(cfg) if self.scenario == "coverage" else None
-        self.num_steps = 0
 
     # ----------------------------------------------------------------- spaces
     def observation_space(self, agent: str) -> gymnasium.spaces.Box:
@@ -88,63 +109,20 @@ class FovEnvBase(ParallelEnv):
             raise ValueError(f"unknown agent {agent!r}; agents are {self.possible_agents}")
         return agent
 
-    def _cue_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        L = self.config.arena_size_m
-        diag = L * np.sqrt(2.0)
-        lo = np.array([0.0, 0.0, -1.0, -1.0, -diag, -diag, 0.0])
-        hi = np.array([L, L, 1.0, 1.0, diag, diag, diag])
-        return lo, hi
+    # ------------------------------------------------------- the core's copy 0
+    @property
+    def num_steps(self) -> int:
+        """Steps taken in the current episode."""
+        return int(self._core.num_steps[0])
 
-    def _make_obs_space(self) -> gymnasium.spaces.Box:
-        n = self.config.n_agents
-        b = self._camera.measure_bound_m
-        slot_lo = np.array([0.0, -b, -b, -1.0, -1.0])
-        slot_hi = np.array([1.0, b, b, 1.0, 1.0])
-        cue_lo, cue_hi = self._cue_bounds()
-        lo = np.concatenate([np.tile(slot_lo, n - 1), cue_lo]).astype(np.float32)
-        hi = np.concatenate([np.tile(slot_hi, n - 1), cue_hi]).astype(np.float32)
-        assert lo.size == SLOT_SIZE * (n - 1) + CUE_SIZE
-        return gymnasium.spaces.Box(lo, hi, dtype=np.float32)
+    @property
+    def _poses(self) -> np.ndarray:
+        return self._core.poses[0]
 
-    def _make_state_space(self) -> gymnasium.spaces.Box:
-        L = self.config.arena_size_m
-        n = self.config.n_agents
-        lo = np.tile([0.0, 0.0, -1.0, -1.0], n)
-        hi = np.tile([L, L, 1.0, 1.0], n)
-        extra_lo, extra_hi = self._state_extra_bounds()
-        return gymnasium.spaces.Box(
-            np.concatenate([lo, extra_lo]).astype(np.float32),
-            np.concatenate([hi, extra_hi]).astype(np.float32),
-            dtype=np.float32,
-        )
-
-    # -------------------------------------------------- scenario-specific hooks
-    def _state_extra_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        raise NotImplementedError
-
-    def _state_extra(self) -> np.ndarray:
-        raise NotImplementedError
-
-    def _reset_scenario(self, rng: np.random.Generator) -> np.ndarray:
-        """Return start poses (N, 3) and set scenario state."""
-        raise NotImplementedError
-
-    def _goal_world(self) -> np.ndarray:
-        """(N, 2) world point each robot's cue refers to (q_m or its target)."""
-        raise NotImplementedError
-
-    def _cue_scalar(self, goal_body: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
-
-    def _rewards_and_metrics(
-        self, col_i: np.ndarray, viol_i: np.ndarray, metrics: dict[str, Any], reset: bool = False
-    ) -> tuple[np.ndarray, bool]:
-        """Add scenario metrics to ``metrics``; return rewards (N,) and termination.
-
-        ``col_i``/``viol_i``: (N,) collisions / D_s violations robot i is part of.
-        With ``reset=True`` only initialise the scenario's running quantities.
-        """
-        raise NotImplementedError
+    @property
+    def _targets(self) -> np.ndarray | None:
+        t = self._core.targets
+        return None if t is None else t[0]
 
     # --------------------------------------------------------------- episode
     def reset(
@@ -153,53 +131,40 @@ class FovEnvBase(ParallelEnv):
         seed = check_seed("seed", seed)
         if options is not None and not isinstance(options, Mapping):
             raise ValueError(f"options must be a dict or None, got {describe(options)}")
-        if seed is not None or self._rng is None:
-            self._rng = np.random.default_rng(seed)
+        obs, metrics = self._core.reset(np.zeros(1, dtype=np.int64), [seed])
         self.agents = list(self.possible_agents)
-        self.num_steps = 0
-        self._collisions_total = 0
-        self._violations_total = 0
-        self._min_distance_episode = np.inf
-        try:
-            self._poses = self._reset_scenario(self._rng)
-        except ValueError as exc:  # random starts that do not fit: name the fields
-            cfg = self.config
-            raise ConfigError(
-                f"reset: {exc} (n_agents = {cfg.n_agents}, arena_size_m = {cfg.arena_size_m}, "
-                f"init_min_separation_m = {cfg.init_min_separation_m})"
-            ) from None
-        metrics = self._step_metrics_common()
-        col_i, viol_i = metrics.pop("_col_i"), metrics.pop("_viol_i")
-        self._rewards_and_metrics(col_i, viol_i, metrics, reset=True)
-        obs = self._observe()
-        infos = agent_infos(self.agents, metrics)
+        infos = self._agent_infos(metrics_row(metrics, 0))
         if self.render_mode == "human":
             self.render()
-        return obs, infos
+        return self._obs_dict(obs[0]), infos
 
     def step(self, actions: dict[str, Any]):
         if not self.agents:
             raise ValueError("step() called on a finished episode; call reset() first")
         act = self._validate_actions(actions)
-        v, w = action_to_velocity(act, self.config.v_max_mps, self.config.omega_max_radps)
-        self._poses = step_poses(self.config, self._poses, v, w)
-        self.num_steps += 1
-
-        metrics = self._step_metrics_common()
-        col_i, viol_i = metrics.pop("_col_i"), metrics.pop("_viol_i")
-        rew, terminate = self._rewards_and_metrics(col_i, viol_i, metrics)
+        obs, rew, term, metrics = self._core.step(act[None])
+        terminate = bool(term[0])
         truncate = self.num_steps >= self.max_cycles
-        obs = self._observe()
         agents = self.agents
-        rewards = {a: float(rew[self.agent_name_mapping[a]]) for a in agents}
-        terminations = {a: bool(terminate) for a in agents}
+        rewards = {a: float(rew[0, self.agent_name_mapping[a]]) for a in agents}
+        terminations = {a: terminate for a in agents}
         truncations = {a: bool(truncate and not terminate) for a in agents}
-        infos = agent_infos(agents, metrics)
+        infos = self._agent_infos(metrics_row(metrics, 0))
+        obs_d = self._obs_dict(obs[0])
         if terminate or truncate:
             self.agents = []
         if self.render_mode == "human":
             self.render()
-        return obs, rewards, terminations, truncations, infos
+        return obs_d, rewards, terminations, truncations, infos
+
+    def _obs_dict(self, full: np.ndarray) -> dict[str, np.ndarray]:
+        """``(N, D)`` float32 observations -> dict of the live agents' rows (copies)."""
+        return {a: full[self.agent_name_mapping[a]].copy() for a in self.agents}
+
+    def _agent_infos(self, metrics: dict[str, Any]) -> dict[str, dict]:
+        """The per-agent infos of one step or reset: the one place they are built (flat
+        ``metrics/<name>`` entries, :func:`fov_marl.infos.agent_infos`)."""
+        return agent_infos(self.agents, metrics)
 
     def _validate_actions(self, actions: dict[str, Any]) -> np.ndarray:
         """``(N, 3)`` float64 actions of the live agents (rows of finished agents zero).
@@ -234,63 +199,10 @@ class FovEnvBase(ParallelEnv):
                     raise ValueError(f"action of {a} must be finite, got {out[i].tolist()}")
         return out
 
-    def _step_metrics_common(self) -> dict[str, Any]:
-        cfg = self.config
-        pos = self._poses[:, :2]
-        n = cfg.n_agents
-        if n > 1:
-            d = pairwise_distances(pos)
-            np.fill_diagonal(d, np.inf)
-            col = d < cfg.collision_distance_m
-            viol = d < cfg.safety_distance_m
-            min_d = float(d.min())
-        else:
-            col = viol = np.zeros((1, 1), dtype=bool)
-            min_d = float("inf")
-        col_i, viol_i = col.sum(1), viol.sum(1)
-        n_col, n_viol = int(col_i.sum() // 2), int(viol_i.sum() // 2)
-        # totals count events: a pair entering contact (or D_s) counts once, however long
-        if self.num_steps == 0:
-            self._col_prev, self._viol_prev = np.zeros_like(col), np.zeros_like(viol)
-        self._collisions_total += int(np.sum(col & ~self._col_prev) // 2)
-        self._violations_total += int(np.sum(viol & ~self._viol_prev) // 2)
-        self._col_prev, self._viol_prev = col, viol
-        self._min_distance_episode = min(self._min_distance_episode, min_d)
-        return {
-            "t_s": self.num_steps * cfg.dt_s,
-            "min_distance": min_d,
-            "min_distance_episode": self._min_distance_episode,
-            "collisions": n_col,
-            "collisions_total": self._collisions_total,
-            "safety_violations": n_viol,
-            "safety_violations_total": self._violations_total,
-            "_col_i": col_i,
-            "_viol_i": viol_i,
-        }
-
-    def _observe(self) -> dict[str, np.ndarray]:
-        cfg = self.config
-        n = cfg.n_agents
-        blocks = self._camera.neighbour_blocks(self._poses, self._rng)
-        goal_body = world_to_body(self._goal_world(), self._poses)
-        cue = np.empty((n, CUE_SIZE))
-        cue[:, 0:2] = self._poses[:, :2]
-        cue[:, 2] = np.cos(self._poses[:, 2])
-        cue[:, 3] = np.sin(self._poses[:, 2])
-        cue[:, 4:6] = goal_body
-        cue[:, 6] = self._cue_scalar(goal_body)
-        full = np.concatenate([blocks.reshape(n, -1), cue], axis=1).astype(np.float32)
-        # Only float32 round-off can cross the documented bounds; keep contains() exact.
-        np.clip(full, self._obs_space.low, self._obs_space.high, out=full)
-        return {a: full[self.agent_name_mapping[a]].copy() for a in self.agents}
-
     # ----------------------------------------------------------------- state
     def state(self) -> np.ndarray:
         """Global state for centralised critics (see the module docstring)."""
-        p = self._poses
-        per = np.column_stack([p[:, 0], p[:, 1], np.cos(p[:, 2]), np.sin(p[:, 2])]).reshape(-1)
-        s = np.concatenate([per, self._state_extra()]).astype(np.float32)
-        return np.clip(s, self.state_space.low, self.state_space.high)
+        return self._core.state()[0]
 
     @property
     def poses(self) -> np.ndarray:

@@ -3,7 +3,8 @@ limited-FoV camera and no communication (paper Section VII-D, Fig. 7).
 
 ============================  ==============================================================
 Import                        ``from fov_marl.envs import fov_crossing_v0``
-API                           PettingZoo ``ParallelEnv`` (``parallel_env``), AEC (``env``)
+API                           PettingZoo ``ParallelEnv`` (``parallel_env``), AEC (``env``),
+                              B copies over arrays (``vector_env``, :mod:`fov_marl.envs.vector`)
 Agents                        ``robot_0 … robot_{N−1}``, N = ``n_agents`` (default 4)
 Action space                  ``Box(-1, 1, (3,), float32)`` per agent
 Observation space             ``Box(low, high, (5 (N − 1) + 7,), float32)`` per agent
@@ -92,66 +93,19 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from fov_marl.envs.base import FovEnvBase
-from fov_marl.envs.world import crossing_layout
+from fov_marl.envs.vector import FovVectorEnv
 
-__all__ = ["raw_env", "parallel_env", "env", "FovCrossingEnv"]
+__all__ = ["raw_env", "parallel_env", "env", "vector_env", "FovCrossingEnv"]
 
 
 class FovCrossingEnv(FovEnvBase):
-    """The crossing ParallelEnv (see the module docstring)."""
+    """The crossing ParallelEnv (see the module docstring); a B = 1 view of the batched core."""
 
     metadata = {**FovEnvBase.metadata, "name": "fov_crossing_v0"}
     scenario = "crossing"
-
-    def _state_extra_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        n, L = self.config.n_agents, self.config.arena_size_m
-        return np.zeros(2 * n), np.full(2 * n, L)
-
-    def _state_extra(self) -> np.ndarray:
-        return self._targets.reshape(-1)
-
-    def _reset_scenario(self, rng: np.random.Generator) -> np.ndarray:
-        starts, targets = crossing_layout(self.config, rng)
-        self._targets = targets
-        if self.config.initial_poses is not None:
-            starts = np.array(self.config.initial_poses, dtype=np.float64)
-        return starts
-
-    def _goal_world(self) -> np.ndarray:
-        return self._targets
-
-    def _cue_scalar(self, goal_body: np.ndarray) -> np.ndarray:
-        return np.linalg.norm(goal_body, axis=-1)
-
-    def _rewards_and_metrics(
-        self, col_i: np.ndarray, viol_i: np.ndarray, metrics: dict[str, Any], reset: bool = False
-    ) -> tuple[np.ndarray, bool]:
-        cfg = self.config
-        dist = np.linalg.norm(self._targets - self._poses[:, :2], axis=-1)
-        here = dist < cfg.target_tolerance_m
-        if reset:
-            self._dist_prev = dist
-            self._arrived_ever = here.copy()
-            rew = np.zeros(cfg.n_agents)
-        else:
-            first = here & ~self._arrived_ever
-            self._arrived_ever |= here
-            rew = (
-                cfg.progress_gain * (self._dist_prev - dist)
-                + cfg.arrival_bonus * first
-                - cfg.collision_penalty * col_i
-                - cfg.safety_penalty * viol_i
-            )
-            self._dist_prev = dist
-        metrics["arrived"] = int(here.sum())
-        metrics["arrived_ever"] = int(self._arrived_ever.sum())
-        metrics["mean_distance_to_target"] = float(dist.mean())
-        metrics["max_distance_to_target"] = float(dist.max())
-        return rew.astype(np.float64), bool(here.all()) and not reset
 
 
 def raw_env(render_mode: str | None = None, **config: Any) -> FovCrossingEnv:
@@ -167,3 +121,13 @@ def parallel_env(render_mode: str | None = None, **config: Any) -> FovCrossingEn
 def env(render_mode: str | None = None, **config: Any):
     """PettingZoo AEC version, through PettingZoo's ``parallel_to_aec`` conversion."""
     return parallel_to_aec(parallel_env(render_mode=render_mode, **config))
+
+
+def vector_env(num_envs: int = 1, **config: Any) -> FovVectorEnv:
+    """``num_envs`` copies stepped together over arrays (see :mod:`fov_marl.envs.vector`).
+
+    Copy k after ``reset(seed=s)`` is bit-identical to ``parallel_env(**config)`` after
+    ``reset(seed=s + k)`` under the same actions; finished copies reset automatically
+    in the same step. Keywords are :class:`~fov_marl.config.ScenarioConfig` fields.
+    """
+    return FovVectorEnv(num_envs, "crossing", "fov_crossing_v0", config)

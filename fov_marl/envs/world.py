@@ -18,7 +18,14 @@ from __future__ import annotations
 import numpy as np
 
 from fov_marl.config import ScenarioConfig
-from fov_marl.geometry import in_fov, integrate_unicycle, relative_pose, wrap_angle
+from fov_marl.geometry import (
+    in_fov,
+    integrate_unicycle,
+    relative_pose,
+    relative_pose_batch,
+    world_to_body,
+    wrap_angle,
+)
 from fov_marl.spaces import SLOT_SIZE
 
 __all__ = [
@@ -35,16 +42,17 @@ def step_poses(
     """Advance all robots by one step ``config.dt_s``.
 
     Args:
-        poses_world: ``(N, 3)`` world poses ``[x m, y m, yaw rad]``.
-        v_body: ``(N, 2)`` body-frame velocities (m/s).
-        omega: ``(N,)`` yaw rates (rad/s).
+        poses_world: ``(..., N, 3)`` world poses ``[x m, y m, yaw rad]`` (leading
+            copy axes allowed: the batched core passes ``(B, N, 3)``).
+        v_body: ``(..., N, 2)`` body-frame velocities (m/s).
+        omega: ``(..., N)`` yaw rates (rad/s).
 
     Returns:
-        ``(N, 3)`` new poses, positions projected onto ``[r, L − r]²``.
+        ``(..., N, 3)`` new poses, positions projected onto ``[r, L − r]²``.
     """
     new = integrate_unicycle(poses_world, v_body, omega, config.dt_s)
     r = config.robot_radius_m
-    np.clip(new[:, :2], r, config.arena_size_m - r, out=new[:, :2])
+    np.clip(new[..., :2], r, config.arena_size_m - r, out=new[..., :2])
     return new
 
 
@@ -144,6 +152,14 @@ class Camera:
         np.fill_diagonal(det, False)
         return rel, det
 
+    def detect_batch(self, poses_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`detect` of B teams: ``(..., N, 3)`` poses -> ``(..., N, N, 3)``, ``(..., N, N)``."""
+        rel = relative_pose_batch(poses_world)
+        det = in_fov(rel[..., :2], self.config.fov_rad, self.config.detection_range_m)
+        d = np.arange(self.config.n_agents)
+        det[..., d, d] = False
+        return rel, det
+
     def neighbour_blocks(self, poses_world: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Noisy neighbour slots of all robots.
 
@@ -159,16 +175,47 @@ class Camera:
         noise = rng.standard_normal((n, n, 3))
         clip = self.config.meas_noise_clip_sigma
         np.clip(noise, -clip, clip, out=noise)
-        rel, det = self.detect(poses_world)
-        meas = rel + noise * self._std
-        meas_s = meas[self._rows, self.slot_ids]
-        det_s = det[self._rows, self.slot_ids]
-        out = np.zeros((n, n - 1, SLOT_SIZE))
-        out[..., 0] = det_s
-        dyaw = wrap_angle(meas_s[..., 2])
-        out[..., 1] = meas_s[..., 0]
-        out[..., 2] = meas_s[..., 1]
-        out[..., 3] = np.cos(dyaw)
-        out[..., 4] = np.sin(dyaw)
-        out[~det_s] = 0.0
+        return self.neighbour_blocks_from_noise(poses_world, noise)
+
+    def neighbour_blocks_from_noise(self, poses_world: np.ndarray, noise: np.ndarray) -> np.ndarray:
+        """Neighbour slots of B teams from given standard normals (the batched core).
+
+        Only the relative positions of all pairs are computed (the FoV test needs
+        them); headings, noise and the cos/sin of the measured heading are computed
+        for the detected pairs alone, with the same arithmetic as :meth:`detect`, so
+        the result equals :meth:`neighbour_blocks` bit for bit.
+
+        Args:
+            poses_world: ``(..., N, 3)`` ground-truth poses.
+            noise: ``(..., N, N, 3)`` standard normals already clipped at
+                ``meas_noise_clip_sigma``; entry ``[..., i, j]`` perturbs j seen from i.
+
+        Returns:
+            ``(..., N, N − 1, 5)`` float64 slots as :meth:`neighbour_blocks`.
+        """
+        p = np.asarray(poses_world, dtype=np.float64)
+        p_body = world_to_body(p[..., None, :, :2], p[..., :, None, :])  # (..., N, N, 2)
+        det = in_fov(p_body, self.config.fov_rad, self.config.detection_range_m)
+        d = np.arange(self.config.n_agents)
+        det[..., d, d] = False
+        det_s = det[..., self._rows, self.slot_ids]  # (..., N, N − 1)
+        out = np.zeros((*det_s.shape, SLOT_SIZE))
+        hit = np.nonzero(det_s)
+        if hit[0].size == 0:
+            return out
+        *lead, i, k = hit
+        j = self.slot_ids[i, k]
+        pair = (*lead, i, j)
+        nz = noise[pair]
+        std = self._std
+        dyaw_true = wrap_angle(p[(*lead, j)][:, 2] - p[(*lead, i)][:, 2])
+        dyaw = wrap_angle(dyaw_true + nz[:, 2] * std[2])
+        xy = p_body[pair]
+        vals = np.empty((j.size, SLOT_SIZE))
+        vals[:, 0] = 1.0
+        vals[:, 1] = xy[:, 0] + nz[:, 0] * std[0]
+        vals[:, 2] = xy[:, 1] + nz[:, 1] * std[1]
+        vals[:, 3] = np.cos(dyaw)
+        vals[:, 4] = np.sin(dyaw)
+        out[det_s] = vals
         return out

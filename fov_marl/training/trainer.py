@@ -238,11 +238,45 @@ def make_training_vec_env(
     *,
     normalize: bool = True,
     gamma: float = 0.99,
-) -> tuple[ParallelEnvVecEnv, Any]:
-    """``(adapter, vec_env)``: the adapter, then ``VecMonitor`` and optionally ``VecNormalize``."""
+    eta_method: str = "exact",
+) -> tuple[Any, Any]:
+    """``(adapter, vec_env)``: the adapter, then ``VecMonitor`` and optionally ``VecNormalize``.
+
+    ``env_factory()`` is called once to see what it builds. A raw scenario env
+    (``fov_coverage_v0``/``fov_crossing_v0`` ParallelEnv, no wrapper, no rendering) is
+    replaced by the batched vector env of its config and ``max_cycles``, all copies
+    stepped in one call through :class:`~fov_marl.training.vec_env.VectorEnvVecEnv`;
+    anything else (the safety filter and the belief wrapper need a ParallelEnv per
+    copy) goes through :class:`~fov_marl.training.vec_env.ParallelEnvVecEnv` over
+    ``n_envs`` factory calls (the probe is the first copy). Both adapters give the same
+    slots, observations, rewards and infos for the same seed. ``eta_method="strip"``
+    (vector path, coverage only) trains on the cheaper
+    :class:`~fov_marl.metrics.StripCoverageMetric` η; the default keeps the exact one.
+    """
+    from fov_marl.envs.fov_coverage_v0 import FovCoverageEnv
+    from fov_marl.envs.fov_crossing_v0 import FovCrossingEnv
+    from fov_marl.envs.vector import FovVectorEnv
+    from fov_marl.training.vec_env import VectorEnvVecEnv
+
     if isinstance(n_envs, bool) or not isinstance(n_envs, int | np.integer) or n_envs < 1:
         raise ValueError(f"n_envs must be an integer in [1, inf), got {n_envs!r}")
-    adapter = ParallelEnvVecEnv([env_factory for _ in range(int(n_envs))])
+    probe = env_factory()
+    adapter: Any
+    if type(probe) in (FovCoverageEnv, FovCrossingEnv) and probe.render_mode is None:
+        vector = FovVectorEnv.from_config(probe.config, int(n_envs), eta_method=eta_method)
+        vector.max_cycles = probe.max_cycles
+        probe.close()
+        adapter = VectorEnvVecEnv(vector)
+    else:
+        if eta_method != "exact":
+            raise ValueError(
+                f"eta_method={eta_method!r} needs a raw scenario env (no wrappers); "
+                "wrapped envs use the exact eta"
+            )
+        first = [probe]
+        adapter = ParallelEnvVecEnv(
+            [lambda: first.pop() if first else env_factory() for _ in range(int(n_envs))]
+        )
     venv: Any = VecMonitor(adapter)
     if normalize:
         venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=gamma)

@@ -1,4 +1,12 @@
-"""Parameter-sharing adapter: PettingZoo ``ParallelEnv`` copies -> one SB3 ``VecEnv``.
+"""Parameter-sharing adapters: env copies -> one SB3 ``VecEnv``, one slot per robot.
+
+Two adapters with one slot layout and one info contract: :class:`VectorEnvVecEnv`
+over the batched vector env (``fov_*_v0.vector_env``: all copies stepped in one call,
+no per-copy objects; what :func:`fov_marl.training.trainer.make_training_vec_env`
+uses for raw envs) and :class:`ParallelEnvVecEnv` over per-copy PettingZoo
+``ParallelEnv`` objects (kept for wrapped envs: the safety filter and the belief
+wrapper need a ParallelEnv per copy). Given the same seed both produce the same
+observations, rewards, dones and infos slot by slot (tested).
 
 Every agent of every env copy is one slot of the VecEnv, so one SB3 policy is shared
 by all robots (decentralised execution: each slot sees only its own agent's
@@ -66,9 +74,15 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from fov_marl.infos import AgentInfo
+from fov_marl.infos import METRICS_PREFIX, AgentInfo
 
-__all__ = ["ParallelEnvVecEnv", "make_parallel_vec_env", "wrapper_chain"]
+__all__ = [
+    "ParallelEnvVecEnv",
+    "VectorEnvVecEnv",
+    "make_parallel_vec_env",
+    "make_vector_vec_env",
+    "wrapper_chain",
+]
 
 EnvFactory = Callable[[], Any]
 
@@ -361,6 +375,183 @@ def make_parallel_vec_env(
     if isinstance(n_envs, bool) or not isinstance(n_envs, int | np.integer) or n_envs < 1:
         raise ValueError(f"n_envs must be an integer in [1, inf), got {n_envs!r}")
     venv = ParallelEnvVecEnv([env_fn for _ in range(int(n_envs))])
+    if seed is not None:
+        venv.seed(seed)
+    return venv
+
+
+class VectorEnvVecEnv(VecEnv):
+    """SB3 ``VecEnv`` over a batched vector env (``fov_*_v0.vector_env``), one slot per robot.
+
+    The slot layout, seeding, truncation and info contract are those of
+    :class:`ParallelEnvVecEnv` (module docstring): slot ``s`` holds robot ``s % N`` of
+    copy ``s // N``; ``seed(s)`` makes copy k start from ``s + k`` at the next
+    :meth:`reset`; a finished copy is reset in the same step (the vector env's
+    same-step autoreset, continuing its generator) and its slots report ``done`` with
+    ``terminal_observation`` and ``TimeLimit.truncated``; ``infos[slot]`` holds the flat
+    ``"metrics/<name>"`` entries (the copy's metrics of that step, Python scalars; an
+    :class:`~fov_marl.infos.AgentInfo`, as the per-copy adapter gives), ``"agent"``,
+    ``"agent_index"`` and ``"env_index"``; reset metrics are in ``reset_infos``.
+
+    Attribute access acts on the one vector env: ``get_attr`` returns its attribute
+    once per slot, ``set_attr`` sets it (e.g. ``max_cycles``), ``env_method`` calls it
+    once and repeats the result per slot; ``env_is_wrapped`` is False (no wrappers).
+
+    Args:
+        venv: a :class:`~fov_marl.envs.vector.FovVectorEnv` (or an object with its API).
+    """
+
+    def __init__(self, venv: Any) -> None:
+        for attr in ("num_envs", "n_agents", "possible_agents", "single_observation_space"):
+            if not hasattr(venv, attr):
+                raise ValueError(
+                    f"venv must be a vector env (fov_*_v0.vector_env) with {attr!r}, "
+                    f"got {type(venv).__name__}"
+                )
+        self.venv = venv
+        self.n_copies = int(venv.num_envs)
+        self.n_agents = int(venv.n_agents)
+        self.possible_agents: list[str] = list(venv.possible_agents)
+        obs_space = _float32_box(venv.single_observation_space, "observation space")
+        act_space = venv.single_action_space
+        if not isinstance(act_space, gym.spaces.Box):
+            raise ValueError(f"action space must be a gymnasium Box, got {act_space!r}")
+        self._obs_shape = obs_space.shape
+        self._act_shape = act_space.shape
+        self._base_seed: int | None = None
+        self._slot_copy = np.repeat(np.arange(self.n_copies), self.n_agents)
+        self._slot_agent = np.tile(np.arange(self.n_agents), self.n_copies)
+        super().__init__(self.n_copies * self.n_agents, obs_space, act_space)
+        self._actions: np.ndarray | None = None
+
+    # ------------------------------------------------------------- slot maps
+    def slot(self, copy: int, agent: str) -> int:
+        """Slot index of ``agent`` in env copy ``copy``."""
+        return copy * self.n_agents + self.possible_agents.index(agent)
+
+    def slot_to_copy_agent(self, slot: int) -> tuple[int, str]:
+        """``(copy, agent)`` held by ``slot``."""
+        if not 0 <= slot < self.num_envs:
+            raise ValueError(f"slot must be in [0, {self.num_envs - 1}], got {slot}")
+        return slot // self.n_agents, self.possible_agents[slot % self.n_agents]
+
+    # -------------------------------------------------------------- seeding
+    def seed(self, seed: int | None = None) -> list[int | None]:
+        """Seed copy ``k`` with ``seed + k`` at the next :meth:`reset` (None: OS entropy).
+
+        Returns the seed of each *slot* (the seed of its copy).
+        """
+        if seed is None:
+            seed = int(np.random.default_rng().integers(0, np.iinfo(np.uint32).max))
+        self._base_seed = int(seed)
+        return [self._base_seed + int(k) for k in self._slot_copy]
+
+    # ------------------------------------------------------------ reset/step
+    def _infos(self, metrics: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+        """One info dict per slot: the copy's metrics (Python scalars) and slot ids."""
+        cols = {k: v.tolist() for k, v in metrics.items()}
+        per_copy = [{k: col[c] for k, col in cols.items()} for c in range(self.n_copies)]
+        agents = self.possible_agents
+        flat = [{METRICS_PREFIX + k: v for k, v in m.items()} for m in per_copy]
+        out = []
+        for c in range(self.n_copies):
+            for i in range(self.n_agents):
+                info = AgentInfo(flat[c])
+                info.update(agent=agents[i], agent_index=i, env_index=c)
+                out.append(info)
+        return out
+
+    def reset(self) -> VecEnvObs:
+        seed, self._base_seed = self._base_seed, None
+        obs, infos = self.venv.reset(seed=seed)
+        self.reset_infos = self._infos(infos["metrics"])
+        self._reset_seeds()
+        self._reset_options()
+        return obs.reshape(self.num_envs, *self._obs_shape).astype(np.float32, copy=False)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        actions = np.asarray(actions)
+        if actions.shape != (self.num_envs, *self._act_shape):
+            raise ValueError(
+                f"actions must have shape (num_envs, *action_shape) = "
+                f"{(self.num_envs, *self._act_shape)}, got {actions.shape}"
+            )
+        self._actions = actions
+
+    def step_wait(self) -> VecEnvStepReturn:
+        if self._actions is None:
+            raise ValueError("step_wait() called without step_async(actions)")
+        actions, self._actions = self._actions, None
+        B, N = self.n_copies, self.n_agents
+        obs, rew, term, trunc, vinfos = self.venv.step(actions.reshape(B, N, *self._act_shape))
+        done_copy = vinfos["_final_obs"]
+        dones = np.repeat(done_copy, N)
+        infos = self._infos(vinfos["metrics"])
+        time_limit = (trunc & ~term).reshape(-1)
+        if done_copy.any():
+            final = vinfos["final_obs"].reshape(self.num_envs, *self._obs_shape)
+            reset_infos = self._infos(vinfos["reset_metrics"])
+            for s in np.flatnonzero(dones).tolist():
+                infos[s]["terminal_observation"] = final[s].astype(np.float32, copy=True)
+                infos[s]["TimeLimit.truncated"] = bool(time_limit[s])
+                self.reset_infos[s] = reset_infos[s]
+        for s in np.flatnonzero(~dones).tolist():
+            infos[s]["TimeLimit.truncated"] = False
+        obs = obs.reshape(self.num_envs, *self._obs_shape).astype(np.float32, copy=False)
+        return obs, rew.reshape(-1).astype(np.float32, copy=False), dones, infos
+
+    def close(self) -> None:
+        self.venv.close()
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        """The vector env does not render: one None per copy (with a warning)."""
+        warnings.warn("the vector env does not render; get_images returns None", stacklevel=2)
+        return [None] * self.n_copies
+
+    # --------------------------------------------------- attribute access
+    def _slots(self, indices: VecEnvIndices) -> list[int]:
+        slots = [int(s) for s in self._get_indices(indices)]
+        for s in slots:
+            if not 0 <= s < self.num_envs:
+                raise ValueError(f"slot index must be in [0, {self.num_envs - 1}], got {s}")
+        return slots
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        """The vector env's attribute, once per slot of ``indices``."""
+        value = getattr(self.venv, attr_name)
+        return [value for _ in self._slots(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        """Set the attribute on the vector env (shared by all copies, whatever ``indices``)."""
+        self._slots(indices)
+        setattr(self.venv, attr_name, value)
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs
+    ) -> list[Any]:
+        """Call the vector env's method once; each slot of ``indices`` gets the result."""
+        slots = self._slots(indices)
+        result = getattr(self.venv, method_name)(*method_args, **method_kwargs)
+        return [result for _ in slots]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
+        """Always False: the vector env has no wrappers."""
+        return [False for _ in self._slots(indices)]
+
+
+def make_vector_vec_env(
+    scenario_module: Any, n_envs: int = 1, seed: int | None = None, **config: Any
+) -> VectorEnvVecEnv:
+    """``scenario_module.vector_env(num_envs=n_envs, **config)`` as a :class:`VectorEnvVecEnv`.
+
+    Args:
+        scenario_module: ``fov_coverage_v0`` or ``fov_crossing_v0``.
+        n_envs: number of env copies, >= 1 (slots = ``n_envs * n_agents``).
+        seed: if given, :meth:`VectorEnvVecEnv.seed` is called with it.
+    """
+    if isinstance(n_envs, bool) or not isinstance(n_envs, int | np.integer) or n_envs < 1:
+        raise ValueError(f"n_envs must be an integer in [1, inf), got {n_envs!r}")
+    venv = VectorEnvVecEnv(scenario_module.vector_env(num_envs=int(n_envs), **config))
     if seed is not None:
         venv.seed(seed)
     return venv

@@ -24,7 +24,9 @@ from stable_baselines3.common.vec_env import (  # noqa: E402
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0  # noqa: E402
 from fov_marl.training.vec_env import (  # noqa: E402
     ParallelEnvVecEnv,
+    VectorEnvVecEnv,
     make_parallel_vec_env,
+    make_vector_vec_env,
     wrapper_chain,
 )
 
@@ -315,3 +317,177 @@ def test_stub_termination_and_seed_return():
     assert done.all() and not any(i["TimeLimit.truncated"] for i in infos)
     np.testing.assert_array_equal(infos[0]["terminal_observation"], np.full(2, 0.3, np.float32))
     np.testing.assert_array_equal(obs, np.zeros((4, 2)))  # reset observation
+
+
+# ------------------------------------------------------------ the vector-env adapter
+def _assert_same_step(a, b):
+    for x, y in zip(a[:3], b[:3], strict=True):
+        np.testing.assert_array_equal(x, y)
+        assert x.dtype == y.dtype and x.shape == y.shape
+    for ia, ib in zip(a[3], b[3], strict=True):
+        assert list(ia) == list(ib)  # same keys in the same order
+        for key in ia:
+            if key == "terminal_observation":
+                np.testing.assert_array_equal(ia[key], ib[key])
+                assert ia[key].dtype == np.float32
+            else:
+                assert ia[key] == ib[key], key
+
+
+@pytest.mark.parametrize(
+    "mod, cfg",
+    [
+        (fov_coverage_v0, dict(n_agents=N, max_cycles=7)),
+        # copies terminate early at different steps, and truncate
+        (
+            fov_crossing_v0,
+            dict(n_agents=3, max_cycles=9, target_tolerance_m=3.4, crossing_radius_m=1.5),
+        ),
+    ],
+    ids=["coverage", "crossing"],
+)
+def test_vector_adapter_matches_the_parallel_adapter_slot_by_slot(mod, cfg):
+    n_envs = 3
+    ours = make_vector_vec_env(mod, n_envs=n_envs, seed=5, **cfg)
+    ref = make_parallel_vec_env(lambda: mod.parallel_env(**cfg), n_envs=n_envs, seed=5)
+    assert ours.num_envs == ref.num_envs == n_envs * cfg["n_agents"]
+    assert ours.observation_space == ref.observation_space
+    assert ours.action_space == ref.action_space
+    np.testing.assert_array_equal(ours.reset(), ref.reset())
+    assert ours.reset_infos == ref.reset_infos
+    assert [ours.slot_to_copy_agent(s) for s in range(ours.num_envs)] == [
+        ref.slot_to_copy_agent(s) for s in range(ref.num_envs)
+    ]
+    rng = np.random.default_rng(3)
+    dones = 0
+    for _ in range(25):
+        act = _actions(rng, ours, scale=1.3)
+        a, b = ours.step(act), ref.step(act)
+        _assert_same_step(a, b)
+        assert ours.reset_infos == ref.reset_infos
+        dones += int(a[2].sum())
+    assert dones >= 3 * ours.num_envs
+    # a later reset() without a new seed continues every copy's generator, like ref
+    np.testing.assert_array_equal(ours.reset(), ref.reset())
+
+
+def test_vector_adapter_termination_is_not_truncation():
+    probe = fov_crossing_v0.parallel_env(n_agents=4)
+    probe.reset(seed=5)
+    starts = np.column_stack([probe.targets, np.zeros(4)])
+    venv = make_vector_vec_env(
+        fov_crossing_v0, n_envs=1, seed=5, n_agents=4, initial_poses=starts, max_cycles=50
+    )
+    venv.reset()
+    _, _, done, infos = venv.step(np.zeros((4, 3), np.float32))
+    assert done.all()
+    assert all(i["TimeLimit.truncated"] is False for i in infos)
+    assert all("terminal_observation" in i for i in infos)
+
+
+def test_vector_adapter_seeding_attributes_and_errors():
+    venv = make_vector_vec_env(fov_coverage_v0, n_envs=3, n_agents=N, max_cycles=7)
+    assert venv.seed(7) == [7] * N + [8] * N + [9] * N
+    first = venv.reset()
+    assert not np.array_equal(first, venv.reset())  # a seed is used once
+    assert venv.get_attr("max_cycles", indices=[0, N]) == [7, 7]
+    assert venv.get_attr("render_mode") == [None] * (3 * N)
+    venv.set_attr("max_cycles", 2)
+    assert venv.venv.max_cycles == 2
+    assert venv.env_is_wrapped(VecMonitor) == [False] * (3 * N)
+    states = venv.env_method("state", indices=[0, 1])
+    assert states[0].shape == (3, venv.venv.state().shape[1]) and states[0] is states[1]
+    with pytest.raises(ValueError, match="slot index"):
+        venv.get_attr("max_cycles", indices=[3 * N])
+    with pytest.raises(ValueError, match="shape"):
+        venv.step(np.zeros((N, 3), np.float32))
+    with pytest.raises(ValueError, match="finite"):
+        venv.step(np.full((3 * N, 3), np.nan, np.float32))
+    with pytest.raises(ValueError, match="n_envs"):
+        make_vector_vec_env(fov_coverage_v0, n_envs=0)
+    with pytest.raises(ValueError, match="vector env"):
+        VectorEnvVecEnv(_cov())
+    # SB3 wrappers stack on it
+    wrapped = VecNormalize(
+        VecMonitor(
+            VecCheckNan(make_vector_vec_env(fov_coverage_v0, 2, seed=0, n_agents=N, max_cycles=7))
+        )
+    )
+    wrapped.reset()
+    rng = np.random.default_rng(0)
+    episodes = []
+    for _ in range(8):
+        *_, infos = wrapped.step(_actions(rng, wrapped))
+        episodes += [i["episode"] for i in infos if "episode" in i]
+    assert len(episodes) == 2 * N and all(e["l"] == 7 for e in episodes)
+
+
+def test_make_training_vec_env_picks_the_adapter():
+    from fov_marl.training.trainer import build_env, make_training_vec_env
+
+    adapter, venv = make_training_vec_env(2, lambda: build_env("coverage", {"n_agents": N}))
+    assert isinstance(adapter, VectorEnvVecEnv) and adapter.num_envs == 2 * N
+    assert isinstance(venv, VecNormalize)
+    adapter, _ = make_training_vec_env(
+        2, lambda: build_env("crossing", {"n_agents": N, "max_cycles": 11}), normalize=False
+    )
+    assert isinstance(adapter, VectorEnvVecEnv) and adapter.venv.max_cycles == 11
+    built = []
+
+    def wrapped():
+        built.append(build_env("coverage", {"n_agents": N}, safety_filter=True))
+        return built[-1]
+
+    adapter, _ = make_training_vec_env(2, wrapped, normalize=False)
+    assert isinstance(adapter, ParallelEnvVecEnv)
+    assert len(built) == 2 and adapter.envs == built  # the probe is the first copy
+    with pytest.raises(ValueError, match="eta_method"):
+        make_training_vec_env(2, wrapped, eta_method="strip")
+    adapter, _ = make_training_vec_env(
+        1, lambda: build_env("coverage", {"n_agents": N}), eta_method="strip"
+    )
+    assert adapter.venv.eta_method == "strip"
+
+
+def test_ppo_on_the_vector_adapter_equals_ppo_on_the_parallel_adapter():
+    """A few hundred PPO steps: the same seed gives the same policy with either adapter."""
+    import torch
+    from stable_baselines3 import PPO
+
+    def train(venv):
+        model = PPO(
+            "MlpPolicy",
+            venv,
+            n_steps=32,
+            batch_size=48,
+            n_epochs=2,
+            seed=3,
+            device="cpu",
+            policy_kwargs={"net_arch": [16]},
+        )
+        model.learn(total_timesteps=4 * 32 * venv.num_envs)
+        return model, torch.nn.utils.parameters_to_vector(model.policy.parameters()).detach()
+
+    cfg = dict(n_agents=N, max_cycles=20)
+    prev = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        m1, p1 = train(VecMonitor(make_vector_vec_env(fov_coverage_v0, 2, **cfg)))
+        m2, p2 = train(
+            VecMonitor(make_parallel_vec_env(lambda: fov_coverage_v0.parallel_env(**cfg), 2))
+        )
+    finally:
+        torch.set_num_threads(prev)
+    assert m1.num_timesteps == m2.num_timesteps == 4 * 32 * 2 * N
+    assert torch.equal(p1, p2)
+    p0 = torch.nn.utils.parameters_to_vector(
+        PPO(
+            "MlpPolicy",
+            make_vector_vec_env(fov_coverage_v0, 2, **cfg),
+            seed=3,
+            device="cpu",
+            policy_kwargs={"net_arch": [16]},
+        ).policy.parameters()
+    ).detach()
+    assert not torch.equal(p0, p1)  # it did learn (the parameters moved)
+    assert len(m1.ep_info_buffer) == len(m2.ep_info_buffer) > 0

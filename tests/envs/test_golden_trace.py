@@ -1,0 +1,117 @@
+"""Bit-exact golden traces of both envs, recorded from the pre-batched implementation.
+
+``golden_env_traces.json`` holds one SHA-256 digest per case of everything an episode
+returns (observations, rewards, terminations, truncations, every metric, poses,
+``state()``), over 200 steps of seeded random actions including truncations,
+terminations and resets without a seed (which continue the generator). It was recorded
+from the per-copy ParallelEnv before the envs became views of the batched core, so a
+match means the refactor changed no bit. Floating-point results may legitimately
+differ on another NumPy/BLAS/CPU, so the test runs only where the recorded platform
+fingerprint matches; :mod:`tests.envs.test_vector_env` covers the batched core against
+the ParallelEnv on any platform.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
+
+GOLDEN = Path(__file__).with_name("golden_env_traces.json")
+MODULES = {"coverage": fov_coverage_v0, "crossing": fov_crossing_v0}
+
+#: (scenario, seed, config) cases; max_cycles < 200 forces truncations and unseeded resets.
+CASES: list[tuple[str, int, dict]] = [
+    ("coverage", 0, dict(n_agents=1, max_cycles=70)),
+    ("coverage", 1, dict(n_agents=2, fov_deg=60.0, max_cycles=70)),
+    ("coverage", 2, dict(n_agents=6, max_cycles=90)),
+    ("coverage", 3, dict(n_agents=13, fov_deg=360.0, max_cycles=200)),
+    ("coverage", 4, dict(n_agents=6, fov_deg=200.0, max_cycles=45, sensing_radius_m=9.0)),
+    ("crossing", 0, dict(n_agents=1, max_cycles=70)),
+    ("crossing", 1, dict(n_agents=4, max_cycles=70)),
+    ("crossing", 2, dict(n_agents=7, fov_deg=360.0, max_cycles=200)),
+    # large tolerance: episodes terminate early at random steps
+    (
+        "crossing",
+        3,
+        dict(n_agents=3, max_cycles=200, target_tolerance_m=3.4, crossing_radius_m=1.5),
+    ),
+]
+
+
+def platform_fingerprint() -> str:
+    return f"numpy {np.__version__} {platform.machine()} {platform.system()}"
+
+
+def trace_digest(scenario: str, seed: int, config: dict, n_steps: int = 200) -> str:
+    """SHA-256 of an episode stream of ``n_steps`` steps with automatic unseeded resets."""
+    env = MODULES[scenario].parallel_env(**config)
+    h = hashlib.sha256()
+
+    def put_metrics(infos):
+        for a in env.possible_agents:
+            m = infos[a]["metrics"]
+            h.update(repr(sorted((k, type(v).__name__, repr(v)) for k, v in m.items())).encode())
+
+    obs, infos = env.reset(seed=seed)
+    rng = np.random.default_rng(1000 + seed)
+    for a in env.possible_agents:
+        h.update(obs[a].tobytes())
+    put_metrics(infos)
+    for _ in range(n_steps):
+        if not env.agents:
+            obs, infos = env.reset()
+            h.update(b"reset")
+            for a in env.possible_agents:
+                h.update(obs[a].tobytes())
+            put_metrics(infos)
+        acts = rng.uniform(-1.1, 1.1, (len(env.agents), 3)).astype(np.float32)
+        obs, rew, term, trunc, infos = env.step(dict(zip(env.agents, acts, strict=True)))
+        for a in env.possible_agents:
+            h.update(obs[a].tobytes())
+            h.update(np.float64(rew[a]).tobytes())
+            h.update(bytes([term[a], trunc[a]]))
+        put_metrics(infos)
+        h.update(env.poses.tobytes())
+        h.update(env.state().tobytes())
+    return h.hexdigest()
+
+
+def _case_id(case) -> str:
+    scenario, seed, cfg = case
+    return f"{scenario}-{seed}-" + "-".join(f"{k}={v}" for k, v in cfg.items())
+
+
+def _load() -> dict:
+    return json.loads(GOLDEN.read_text())
+
+
+@pytest.mark.parametrize("case", CASES, ids=_case_id)
+def test_golden_trace_is_bit_identical(case):
+    golden = _load()
+    if golden["platform"] != platform_fingerprint():
+        pytest.skip(f"golden traces recorded on {golden['platform']}")
+    assert trace_digest(*case) == golden["digests"][_case_id(case)]
+
+
+def test_trace_digest_can_fail():
+    # the digest sees a one-step difference in the actions' stream
+    a = trace_digest("coverage", 0, dict(n_agents=2, max_cycles=30), n_steps=20)
+    b = trace_digest("coverage", 0, dict(n_agents=2, max_cycles=30), n_steps=21)
+    c = trace_digest("coverage", 1, dict(n_agents=2, max_cycles=30), n_steps=20)
+    assert len({a, b, c}) == 3
+
+
+if __name__ == "__main__":  # record (only from the reference implementation)
+    out = {
+        "platform": platform_fingerprint(),
+        "digests": {_case_id(c): trace_digest(*c) for c in CASES},
+    }
+    GOLDEN.write_text(json.dumps(out, indent=1) + "\n")
+    print(json.dumps(out, indent=1))
