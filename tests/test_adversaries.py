@@ -17,6 +17,7 @@ from fov_marl.adversaries import (
 )
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
 from fov_marl.envs.fov_coverage_v0 import FovCoverageEnv
+from fov_marl.infos import metrics_of
 from fov_marl.wrappers import SafetyFilterWrapper
 
 SHIPPED = {
@@ -269,7 +270,7 @@ def _unfiltered_collisions(name: str, start: str, n: int, fov: float, steps: int
     adv.reset(seed=seed)
     while env.agents:
         obs, _, _, _, infos = env.step(adv.act(obs))
-    return next(iter(infos.values()))["metrics"]["collisions_total"]
+    return metrics_of(next(iter(infos.values())))["collisions_total"]
 
 
 @pytest.mark.parametrize("name", ["straight", "head_on", "charge_centre", "chase_last_seen"])

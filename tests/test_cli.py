@@ -135,8 +135,16 @@ def test_bench_json_reports_every_layer(capsys):
     assert main(["bench", "--quick", "--n-agents", "6", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)
     sections = {r["section"] for r in rows}
-    assert {"env", "vector_env", "tracker", "control", "controller"} <= sections
-    assert sections <= {"env", "vector_env", "vmas", "tracker", "control", "controller"}
+    assert {"env", "vector_env", "vector_filter", "tracker", "control", "controller"} <= sections
+    assert sections <= {
+        "env",
+        "vector_env",
+        "vector_filter",
+        "vmas",
+        "tracker",
+        "control",
+        "controller",
+    }
     ctrl = [r for r in rows if r["section"] == "controller"]
     assert ctrl[0]["n_agents"] == 6 and ctrl[0]["ms_per_robot_step"] > 0
     assert {"tracker_ms", "lloyd_ms", "qp_ms"} <= set(ctrl[0])

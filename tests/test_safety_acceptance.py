@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from fov_marl.evaluation import run_episode
+from fov_marl.infos import safety_of
 
 
 def _scaled(n: int) -> dict:
@@ -85,7 +86,7 @@ def test_filter_lets_a_robot_travel_blind_only_its_budget_before_it_looks():
         path += float(np.linalg.norm(env.unwrapped.poses[0, :2] - before))
         e = env.pipeline._blind_travel_world[0]
         assert np.linalg.norm(e) <= budget + step_m + 1e-9
-        s = infos["robot_0"]["safety"]
+        s = safety_of(infos["robot_0"])
         if abs(s["applied_action"][2]) > 0.1:
             turned += 1
             assert s["intervened"]

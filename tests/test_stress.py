@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from fov_marl.adversaries import available_adversaries, available_starts
+from fov_marl.infos import metrics_of, safety_of
 from fov_marl.stress import (
     FULL_FOV_DEG,
     FULL_N_AGENTS,
@@ -95,10 +96,10 @@ def test_episode_matches_the_env_metrics_and_the_safety_infos():
     du = []
     while env.agents:
         obs, _, _, _, infos = env.step(adv.act(obs))
-        interv += sum(i["safety"]["intervened"] for i in infos.values())
+        interv += sum(safety_of(i)["intervened"] for i in infos.values())
         du += [
             np.linalg.norm(
-                i["safety"]["applied_action"].astype(float) - i["safety"]["nominal_action"]
+                safety_of(i)["applied_action"].astype(float) - safety_of(i)["nominal_action"]
             )
             for i in infos.values()
         ]
@@ -106,7 +107,7 @@ def test_episode_matches_the_env_metrics_and_the_safety_infos():
         d = np.linalg.norm(p[:, None] - p[None], axis=-1)
         np.fill_diagonal(d, np.inf)
         viol += int(np.sum(d.min(1) < cfg.safety_distance_m))
-    m = infos["robot_0"]["metrics"]
+    m = metrics_of(infos["robot_0"])
     assert rec["collisions"] == m["collisions_total"]
     assert rec["violation_events"] == m["safety_violations_total"]
     assert rec["min_distance_m"] == m["min_distance_episode"]

@@ -10,8 +10,8 @@ d_ij (0 inside) feeds the slack. Every robot runs its own
 :class:`~fov_marl.control.controller.FovCbfController` on its own estimates; the
 world is integrated exactly (:func:`~fov_marl.geometry.integrate_unicycle`).
 
-:func:`bench_batched_filter` times the safety filter (and pfcbf) over B env copies, looped
-over copies as today against one batched pipeline, in one run.
+(The safety filter over B env copies, looped against batched, is timed by
+:func:`fov_marl.bench.bench_batched_filter`: it drives envs, above this layer.)
 
 :func:`bench_lloyd_resolution` justifies the Lloyd stencil spacing: centroid error
 against the polar-quadrature reference versus time.
@@ -43,7 +43,6 @@ __all__ = [
     "bench_control",
     "bench_lloyd_resolution",
     "bench_qp_backends",
-    "bench_batched_filter",
 ]
 
 
@@ -289,163 +288,4 @@ def bench_qp_backends(n_cases: int = 200, seed: int = 0, max_rows: int = 8) -> l
                 "max_dkappa": max(dk),
             }
         )
-    return out
-
-
-def bench_batched_filter(
-    n_copies: tuple[int, ...] = (1, 16, 64, 256),
-    n_agents: int = 6,
-    steps: int = 10,
-    warmup: int = 2,
-    seed: int = 0,
-    scenario: str = "coverage",
-    policy: str = "filter",
-    looped: bool = True,
-) -> list[dict]:
-    """Safety filter (or pfcbf) cost per robot-step, looped over copies vs batched, one run.
-
-    For every B in ``n_copies``, B copies of an ``n_agents`` team (``B N`` robots) are
-    stepped in closed loop (env stepping untimed). Each step both variants get the same
-    inputs: *looped* is today's code, one :class:`~fov_marl.pipeline.PfCbfPipeline` per
-    copy with one :class:`FovCbfController` per robot (``controller="loop"``); *batched*
-    is one pipeline over all copies (``n_copies=B``, one
-    :class:`~fov_marl.estimation.VectorTrackerBank`, the
-    :class:`~fov_marl.control.batched.BatchedFovCbfController`). The batched actions drive
-    the envs; ``max_action_diff`` is the largest difference between the two variants'
-    actions (normalised units). Timed: ``filter`` + ``observe`` (+ ``desired_inputs``
-    for pfcbf) per step.
-
-    Args:
-        n_copies: the B values. n_agents: N. steps / warmup: timed / untimed steps.
-        seed: env copy k is reset with ``seed + k``; the filters are seeded the same way.
-        scenario: ``"coverage"`` or ``"crossing"``.
-        policy: ``"filter"`` (u* = uniform random actions, the filter's settings:
-            :class:`~fov_marl.wrappers.SafetyFilterWrapper` defaults) or ``"pfcbf"``
-            (u* from Lloyd / the crossing law, pfcbf's settings).
-        looped: False skips the looped variant (large B).
-
-    Returns:
-        One dict per B: ``n_copies``, ``n_agents``, ``robots`` (B N), ``robot_steps``,
-        ``looped_ms`` and ``batched_ms`` (wall ms per robot-step), ``looped_cpu_ms`` /
-        ``batched_cpu_ms`` (process CPU time), ``speedup`` (looped / batched, wall),
-        ``batched_stage_ms`` (tracker, safety_rows, qp, lloyd per robot-step),
-        ``max_action_diff``.
-    """
-    # imported here: the benchmark drives envs (the control layer itself never does)
-    from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
-    from fov_marl.estimation import TrackerParams
-    from fov_marl.pipeline import PfCbfPipeline
-    from fov_marl.spaces import action_to_velocity
-    from fov_marl.wrappers.safety_filter import FILTER_CONTROLLER_DEFAULTS, FILTER_TRACKER_DEFAULTS
-
-    if scenario not in ("coverage", "crossing"):
-        raise ValueError(f"scenario must be 'coverage' or 'crossing', got {scenario!r}")
-    if policy not in ("filter", "pfcbf"):
-        raise ValueError(f"policy must be 'filter' or 'pfcbf', got {policy!r}")
-    mod = fov_coverage_v0 if scenario == "coverage" else fov_crossing_v0
-    if policy == "filter":
-        tp = TrackerParams(**FILTER_TRACKER_DEFAULTS)
-        cp = ControllerParams(**FILTER_CONTROLLER_DEFAULTS)
-    else:
-        tp, cp = TrackerParams(), ControllerParams()
-    out = []
-    for B in n_copies:
-        B = int(B)
-        envs = [mod.parallel_env(n_agents=n_agents) for _ in range(B)]
-        agents = list(envs[0].possible_agents)
-        cfg = envs[0].unwrapped.config
-        obs = np.stack(
-            [
-                np.stack([o[a] for a in agents])
-                for o in (e.reset(seed=seed + k)[0] for k, e in enumerate(envs))
-            ]
-        ).astype(np.float32)
-        poses = np.stack([e.unwrapped.poses for e in envs])
-        kw = dict(tracker_params=tp, controller_params=cp)
-        bat = PfCbfPipeline(cfg, n_copies=B, controller="batched", **kw)
-        bat.reset_arrays(obs, [seed + k for k in range(B)], poses)
-        loops = []
-        if looped:
-            for k in range(B):
-                pl = PfCbfPipeline(cfg, controller="loop", **kw)
-                pl.reset_arrays(obs[k : k + 1], [seed + k], poses[k : k + 1])
-                loops.append(pl)
-        rng = np.random.default_rng(seed)
-        acc = {"looped": 0.0, "batched": 0.0, "looped_cpu": 0.0, "batched_cpu": 0.0}
-        stages = {"tracker": 0.0, "safety_rows": 0.0, "qp": 0.0, "lloyd": 0.0}
-        max_diff = 0.0
-        timed = 0
-        for step in range(warmup + steps):
-            if policy == "filter":
-                a = rng.uniform(-1.0, 1.0, (B * n_agents, 3))
-                v, w = action_to_velocity(a, cfg.v_max_mps, cfg.omega_max_radps)
-                u = np.column_stack([v, w])
-            t0, c0 = time.perf_counter(), time.process_time()
-            ub = bat.desired_inputs() if policy == "pfcbf" else u
-            act_b = bat.filter(ub).copy()
-            t1, c1 = time.perf_counter(), time.process_time()
-            tb, cb = t1 - t0, c1 - c0
-            st = dict(bat.last_timings)
-            tl = cl = 0.0
-            for k, pl in enumerate(loops):
-                t0, c0 = time.perf_counter(), time.process_time()
-                ul = (
-                    pl.desired_inputs()
-                    if policy == "pfcbf"
-                    else u[k * n_agents : (k + 1) * n_agents]
-                )
-                act_l = pl.filter(ul)
-                tl += time.perf_counter() - t0
-                cl += time.process_time() - c0
-                max_diff = max(
-                    max_diff, float(np.abs(act_l - act_b[k * n_agents : (k + 1) * n_agents]).max())
-                )
-            nxt = []
-            for k, e in enumerate(envs):
-                o, *_ = e.step({ag: act_b[k * n_agents + i] for i, ag in enumerate(agents)})
-                if not e.agents:
-                    o, _ = e.reset(seed=seed + k)
-                nxt.append(np.stack([o[ag] for ag in agents]))
-            obs = np.stack(nxt).astype(np.float32)
-            t0, c0 = time.perf_counter(), time.process_time()
-            bat.observe_arrays(obs)
-            tb += time.perf_counter() - t0
-            cb += time.process_time() - c0
-            st["tracker"] = bat.last_timings.get("tracker", 0.0)
-            for k, pl in enumerate(loops):
-                t0, c0 = time.perf_counter(), time.process_time()
-                pl.observe_arrays(obs[k : k + 1])
-                tl += time.perf_counter() - t0
-                cl += time.process_time() - c0
-            if step >= warmup:
-                timed += 1
-                acc["batched"] += tb
-                acc["batched_cpu"] += cb
-                acc["looped"] += tl
-                acc["looped_cpu"] += cl
-                for key in stages:
-                    stages[key] += st.get(key, 0.0)
-        rs = max(timed * B * n_agents, 1)
-        sub = stages["qp"] - stages["safety_rows"]
-        row = {
-            "n_copies": B,
-            "n_agents": n_agents,
-            "robots": B * n_agents,
-            "robot_steps": timed * B * n_agents,
-            "policy": policy,
-            "scenario": scenario,
-            "batched_ms": 1e3 * acc["batched"] / rs,
-            "batched_cpu_ms": 1e3 * acc["batched_cpu"] / rs,
-            "looped_ms": 1e3 * acc["looped"] / rs if looped else None,
-            "looped_cpu_ms": 1e3 * acc["looped_cpu"] / rs if looped else None,
-            "speedup": acc["looped"] / acc["batched"] if looped and acc["batched"] > 0 else None,
-            "batched_stage_ms": {
-                "tracker": 1e3 * stages["tracker"] / rs,
-                "safety_rows": 1e3 * stages["safety_rows"] / rs,
-                "qp": 1e3 * max(sub, 0.0) / rs,
-                "lloyd": 1e3 * stages["lloyd"] / rs,
-            },
-            "max_action_diff": max_diff if looped else None,
-        }
-        out.append(row)
     return out

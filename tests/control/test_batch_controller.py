@@ -228,7 +228,7 @@ def test_batched_equals_loop_on_recorded_pfcbf_episode(scenario):
 
 
 def test_bench_batched_filter_reports_both_variants():
-    from fov_marl.control.benchmark import bench_batched_filter
+    from fov_marl.bench import bench_batched_filter
 
     rows = bench_batched_filter(n_copies=(2,), n_agents=3, steps=2, warmup=1)
     (r,) = rows

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from fov_marl.config import ConfigError
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
 from fov_marl.geometry import in_fov, relative_pose
+from fov_marl.infos import metrics_of
 from fov_marl.spaces import ObservationLayout
 
 MODULES = [fov_coverage_v0, fov_crossing_v0]
@@ -238,12 +239,12 @@ def test_coverage_rewards_are_eta_gain_and_collision_penalty():
     poses = [[20.0, 20.0, 0.0], [21.2, 20.0, np.pi], [30.0, 30.0, 0.0]]
     env = fov_coverage_v0.parallel_env(n_agents=3, initial_poses=poses)
     _, infos = env.reset(seed=0)
-    m0 = infos["robot_0"]["metrics"]
+    m0 = metrics_of(infos["robot_0"])
     assert m0["collisions"] == 0 and m0["safety_violations"] == 1
     # robots 0 and 1 drive into each other: 1.2 m -> 0.8 m, a collision
     fwd = np.array([1.0, 0.0, 0.0])
     _, rew, term, trunc, infos = env.step({"robot_0": fwd, "robot_1": fwd, "robot_2": np.zeros(3)})
-    m = infos["robot_0"]["metrics"]
+    m = metrics_of(infos["robot_0"])
     assert m["collisions"] == 1 and m["safety_violations"] == 1
     assert m["min_distance"] == pytest.approx(0.8)
     gain = m["eta"] - m0["eta"]
@@ -254,10 +255,10 @@ def test_coverage_rewards_are_eta_gain_and_collision_penalty():
     _, rew, *_, infos = env.step(
         {"robot_0": -fwd, "robot_1": -fwd, "robot_2": np.array([-1.0, -1.0, 0.0])}
     )
-    gain = infos["robot_0"]["metrics"]["eta"] - m["eta"]
+    gain = metrics_of(infos["robot_0"])["eta"] - m["eta"]
     assert gain > 0
     assert rew["robot_2"] == pytest.approx(100 * gain)
-    assert infos["robot_0"]["metrics"]["collisions_total"] == 1
+    assert metrics_of(infos["robot_0"])["collisions_total"] == 1
     assert not any(term.values()) and not any(trunc.values())
 
 
@@ -281,10 +282,10 @@ def test_crossing_paths_intersect_and_episode_terminates_on_arrival():
         for a in rew:
             total[a] += rew[a]
     assert all(term.values()) and not any(trunc.values())
-    assert infos["robot_0"]["metrics"]["arrived"] == 4
+    assert metrics_of(infos["robot_0"])["arrived"] == 4
     assert env.num_steps < 200
     # paths cross at the centre: the unsafe controller collides, and it is counted
-    assert infos["robot_0"]["metrics"]["collisions_total"] > 0
+    assert metrics_of(infos["robot_0"])["collisions_total"] > 0
 
 
 def test_rendering_frames_and_layers():
@@ -311,11 +312,11 @@ def test_collision_totals_count_events_not_steps():
     env.step({"robot_0": fwd, "robot_1": fwd})  # 0.8 m: contact begins
     for _ in range(3):  # stays in contact: still one event
         *_, infos = env.step({"robot_0": stop, "robot_1": stop})
-        assert infos["robot_0"]["metrics"]["collisions"] == 1
-        assert infos["robot_0"]["metrics"]["collisions_total"] == 1
+        assert metrics_of(infos["robot_0"])["collisions"] == 1
+        assert metrics_of(infos["robot_0"])["collisions_total"] == 1
     env.step({"robot_0": -fwd, "robot_1": -fwd})  # apart
     *_, infos = env.step({"robot_0": fwd, "robot_1": fwd})  # second contact
-    assert infos["robot_0"]["metrics"]["collisions_total"] == 2
+    assert metrics_of(infos["robot_0"])["collisions_total"] == 2
 
 
 @settings(max_examples=30)

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
+from fov_marl.infos import metrics_of
 
 GOLDEN = Path(__file__).with_name("golden_env_traces.json")
 MODULES = {"coverage": fov_coverage_v0, "crossing": fov_crossing_v0}
@@ -56,7 +57,7 @@ def trace_digest(scenario: str, seed: int, config: dict, n_steps: int = 200) -> 
 
     def put_metrics(infos):
         for a in env.possible_agents:
-            m = infos[a]["metrics"]
+            m = metrics_of(infos[a])
             h.update(repr(sorted((k, type(v).__name__, repr(v)) for k, v in m.items())).encode())
 
     obs, infos = env.reset(seed=seed)

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
 from fov_marl.envs.core import noise_chunk_steps
+from fov_marl.infos import metrics_of
 
 MODULES = [fov_coverage_v0, fov_crossing_v0]
 ids = lambda m: m.__name__.rsplit(".", 1)[-1]  # noqa: E731
@@ -31,7 +32,7 @@ def _compare_copies(mod, B: int, seed: int, T: int, **cfg) -> int:
     for k, e in enumerate(envs):
         o, inf = e.reset(seed=seed + k)
         np.testing.assert_array_equal(obs[k], np.stack([o[a] for a in e.possible_agents]))
-        for key, v in inf["robot_0"]["metrics"].items():
+        for key, v in metrics_of(inf["robot_0"]).items():
             assert infos["metrics"][key][k] == v, key
     acts = _actions(np.random.default_rng(seed), T, B, N)
     resets = 0
@@ -51,7 +52,7 @@ def _compare_copies(mod, B: int, seed: int, T: int, **cfg) -> int:
             np.testing.assert_array_equal(rew[k], np.float32([r[a] for a in names]))
             assert list(term[k]) == [te[a] for a in names]
             assert list(trunc[k]) == [tr[a] for a in names]
-            for key, v in inf["robot_0"]["metrics"].items():
+            for key, v in metrics_of(inf["robot_0"]).items():
                 assert infos["metrics"][key][k] == v, (t, k, key)
             if not e.agents:  # finished: final obs kept, obs is the next episode's first
                 resets += 1
@@ -59,7 +60,7 @@ def _compare_copies(mod, B: int, seed: int, T: int, **cfg) -> int:
                 np.testing.assert_array_equal(infos["final_obs"][k], last)
                 o, inf = e.reset()
                 np.testing.assert_array_equal(obs[k], np.stack([o[a] for a in names]))
-                for key, v in inf["robot_0"]["metrics"].items():
+                for key, v in metrics_of(inf["robot_0"]).items():
                     assert infos["reset_metrics"][key][k] == v, key
                 np.testing.assert_array_equal(venv.poses[k], e.poses)
             else:

@@ -25,6 +25,7 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 
+from fov_marl.infos import metrics_of  # noqa: E402
 from fov_marl.training import load_policy, train  # noqa: E402
 
 pytestmark = pytest.mark.slow
@@ -54,7 +55,7 @@ def _evaluate(make_env, factory, seeds):
         t99 = None
         while env.agents:
             obs, _, _, _, infos = env.step(policy.act(obs))
-            m = infos[env.possible_agents[0]]["metrics"]
+            m = metrics_of(infos[env.possible_agents[0]])
             if t99 is None and m["eta"] >= 0.99:
                 t99 = m["t_s"]
         rows.append(

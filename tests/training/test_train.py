@@ -15,6 +15,7 @@ pytest.importorskip("stable_baselines3")
 import torch  # noqa: E402
 from stable_baselines3.common.logger import Logger  # noqa: E402
 
+from fov_marl.infos import metrics_of  # noqa: E402
 from fov_marl.training import load_policy, train  # noqa: E402
 from fov_marl.training.cli_support import (  # noqa: E402
     add_train_arguments,
@@ -107,7 +108,7 @@ def test_reloaded_policy_evaluates_like_a_baseline(ppo_run):
     assert not env.agents  # the episode ran to its (overridden) horizon
     assert acts.dtype == np.float32 and acts.shape == (25, 6, 3)
     assert np.all(np.abs(acts) <= 1.0)
-    assert 0.0 <= infos["robot_0"]["metrics"]["eta"] <= 1.0
+    assert 0.0 <= metrics_of(infos["robot_0"])["eta"] <= 1.0
     # deterministic, and observations are normalised with the saved statistics
     acts2, _ = _episode(load_policy(ppo_run.parent), env, seed=3, steps=25)
     np.testing.assert_array_equal(acts, acts2)

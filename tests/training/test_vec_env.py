@@ -22,6 +22,7 @@ from stable_baselines3.common.vec_env import (  # noqa: E402
 )
 
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0  # noqa: E402
+from fov_marl.infos import metrics_of  # noqa: E402
 from fov_marl.training.vec_env import (  # noqa: E402
     ParallelEnvVecEnv,
     VectorEnvVecEnv,
@@ -85,7 +86,7 @@ def test_spaces_shapes_dtypes_and_slot_layout():
     for s, info in enumerate(infos):
         assert info["agent"] == f"robot_{s % N}"
         assert info["agent_index"] == s % N and info["env_index"] == s // N
-        assert {"eta", "collisions_total"} <= set(info["metrics"])
+        assert {"eta", "collisions_total"} <= set(metrics_of(info))
         assert info["TimeLimit.truncated"] is False
     assert len(venv.reset_infos) == 2 * N and "metrics" in venv.reset_infos[0]
 
@@ -114,7 +115,7 @@ def test_matches_independently_stepped_copies_through_truncation_and_auto_reset(
                 s = k * N + i
                 assert rew[s] == np.float32(r[a])
                 assert done[s] == last
-                assert infos[s]["metrics"] == inf[a]["metrics"]
+                assert metrics_of(infos[s]) == metrics_of(inf[a])
                 if last:
                     assert tr[a] and not te[a]
                     assert infos[s]["TimeLimit.truncated"] is True
@@ -154,7 +155,7 @@ def test_matches_sb3_dummy_vec_env_on_single_agent_envs():
             assert ("terminal_observation" in a) == ("terminal_observation" in b)
             if "terminal_observation" in a:
                 np.testing.assert_array_equal(a["terminal_observation"], b["terminal_observation"])
-            assert a["metrics"] == b["metrics"]
+            assert metrics_of(a) == metrics_of(b)
 
 
 def test_termination_is_not_marked_as_truncation():

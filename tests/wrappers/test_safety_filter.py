@@ -12,6 +12,7 @@ from pettingzoo.test import parallel_api_test
 from fov_marl.control import ControllerParams
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
 from fov_marl.evaluation import run_episode
+from fov_marl.infos import safety_of
 from fov_marl.wrappers import SafetyFilterWrapper
 from fov_marl.wrappers.safety_filter import FILTER_CONTROLLER_DEFAULTS
 
@@ -31,7 +32,7 @@ def test_safety_info_reports_nominal_applied_and_status():
     acts = {a: np.array([1.0, 0.0, 0.3], dtype=np.float32) for a in env.agents}
     _, _, _, _, infos = env.step(acts)
     for a, info in infos.items():
-        s = info["safety"]
+        s = safety_of(info)
         assert set(s) >= {"nominal_action", "applied_action", "intervened", "status", "fallback"}
         np.testing.assert_allclose(s["nominal_action"], acts[a])
         assert env.action_space(a).contains(s["applied_action"])
@@ -187,7 +188,7 @@ def test_filter_changes_few_harmless_random_actions():
         for _ in range(150):
             acts = {a: rng.uniform(-1, 1, 3).astype(np.float32) for a in env.agents}
             _, _, _, _, infos = env.step(acts)
-            changed += sum(bool(i["safety"]["intervened"]) for i in infos.values())
+            changed += sum(bool(safety_of(i)["intervened"]) for i in infos.values())
             total += len(infos)
     assert changed / total <= 0.45, changed / total
 
@@ -207,7 +208,7 @@ def test_commanded_velocity_is_the_one_the_robot_gets_at_a_wall():
         _, _, _, _, infos = env.step(
             {"robot_0": np.array([0.7, 0.7, 0.0], np.float32), "robot_1": np.zeros(3, np.float32)}
         )
-        v, w = action_to_velocity(infos["robot_0"]["safety"]["applied_action"], 1.0, 1.5)
+        v, w = action_to_velocity(safety_of(infos["robot_0"])["applied_action"], 1.0, 1.5)
         free = integrate_unicycle(
             before[0], v * cfg.v_max_mps, w / 1.5 * cfg.omega_max_radps, cfg.dt_s
         )

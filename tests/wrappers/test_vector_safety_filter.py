@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
+from fov_marl.infos import safety_of
 from fov_marl.wrappers import SafetyFilterWrapper, VectorSafetyFilterWrapper
 
 
@@ -94,15 +95,15 @@ def test_vector_filter_equals_per_copy_filters(module, n, controller):
         s = infos["safety"]
         for k, ref in enumerate(refs):
             o, r, te, tr, inf = ref.step({a: act[k, i] for i, a in enumerate(agents)})
-            applied = np.stack([inf[a]["safety"]["applied_action"] for a in agents])
+            applied = np.stack([safety_of(inf[a])["applied_action"] for a in agents])
             np.testing.assert_allclose(s["applied_action"][k], applied, atol=1e-6, err_msg=f"t{t}")
             for key in ("intervened", "status", "fallback"):
                 np.testing.assert_array_equal(
-                    s[key][k], [inf[a]["safety"][key] for a in agents], err_msg=key
+                    s[key][k], [safety_of(inf[a])[key] for a in agents], err_msg=key
                 )
             np.testing.assert_array_equal(
                 s["nominal_action"][k],
-                np.stack([inf[a]["safety"]["nominal_action"] for a in agents]),
+                np.stack([safety_of(inf[a])["nominal_action"] for a in agents]),
             )
             n_intervened += int(s["intervened"][k].sum())
             if not ref.env.agents:  # the reference copy finished: restart it like the vector env
