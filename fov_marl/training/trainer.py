@@ -245,9 +245,11 @@ def make_training_vec_env(
     ``env_factory()`` is called once to see what it builds. A raw scenario env
     (``fov_coverage_v0``/``fov_crossing_v0`` ParallelEnv, no wrapper, no rendering) is
     replaced by the batched vector env of its config and ``max_cycles``, all copies
-    stepped in one call through :class:`~fov_marl.training.vec_env.VectorEnvVecEnv`;
-    anything else (the safety filter and the belief wrapper need a ParallelEnv per
-    copy) goes through :class:`~fov_marl.training.vec_env.ParallelEnvVecEnv` over
+    stepped in one call through :class:`~fov_marl.training.vec_env.VectorEnvVecEnv`; a
+    :class:`~fov_marl.wrappers.SafetyFilterWrapper` on such an env becomes one
+    :class:`~fov_marl.wrappers.VectorSafetyFilterWrapper` over the vector env (same
+    filter parameters; actions equal within 1e-6); anything else (the belief wrapper
+    needs a ParallelEnv per copy) goes through :class:`~fov_marl.training.vec_env.ParallelEnvVecEnv` over
     ``n_envs`` factory calls (the probe is the first copy). Both adapters give the same
     slots, observations, rewards and infos for the same seed. ``eta_method="strip"``
     (vector path, coverage only) trains on the cheaper
@@ -260,13 +262,33 @@ def make_training_vec_env(
 
     if isinstance(n_envs, bool) or not isinstance(n_envs, int | np.integer) or n_envs < 1:
         raise ValueError(f"n_envs must be an integer in [1, inf), got {n_envs!r}")
+    from fov_marl.wrappers import SafetyFilterWrapper, VectorSafetyFilterWrapper
+
+    raw = (FovCoverageEnv, FovCrossingEnv)
     probe = env_factory()
     adapter: Any
-    if type(probe) in (FovCoverageEnv, FovCrossingEnv) and probe.render_mode is None:
+    if type(probe) in raw and probe.render_mode is None:
         vector = FovVectorEnv.from_config(probe.config, int(n_envs), eta_method=eta_method)
         vector.max_cycles = probe.max_cycles
         probe.close()
         adapter = VectorEnvVecEnv(vector)
+    elif (
+        type(probe) is SafetyFilterWrapper
+        and type(probe.env) in raw
+        and probe.env.render_mode is None
+    ):
+        # the filter over all copies at once: one tracker bank, one batched controller
+        vector = FovVectorEnv.from_config(probe.config, int(n_envs), eta_method=eta_method)
+        vector.max_cycles = probe.env.max_cycles
+        pipe = probe.pipeline
+        filtered = VectorSafetyFilterWrapper(
+            vector,
+            init=pipe.init,
+            tracker_params=pipe.tracker_params,
+            controller_params=pipe.controller_params,
+        )
+        probe.close()
+        adapter = VectorEnvVecEnv(filtered)
     else:
         if eta_method != "exact":
             raise ValueError(

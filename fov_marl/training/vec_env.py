@@ -74,7 +74,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from fov_marl.infos import METRICS_PREFIX, AgentInfo
+from fov_marl.infos import METRICS_PREFIX, AgentInfo, status_code
 
 __all__ = [
     "ParallelEnvVecEnv",
@@ -461,6 +461,19 @@ class VectorEnvVecEnv(VecEnv):
                 out.append(info)
         return out
 
+    def _add_safety(self, infos: list[dict[str, Any]], safety: dict[str, np.ndarray]) -> None:
+        """Write the ``safety/*`` entries of every slot from ``(B, N, ...)`` arrays."""
+        flat = {
+            k: np.asarray(v).reshape(self.num_envs, *np.shape(v)[2:]) for k, v in safety.items()
+        }
+        codes = [status_code(str(x)) for x in flat["status"].tolist()]
+        for s, info in enumerate(infos):
+            info["safety/nominal_action"] = flat["nominal_action"][s].astype(np.float32)
+            info["safety/applied_action"] = flat["applied_action"][s].astype(np.float32)
+            info["safety/intervened"] = bool(flat["intervened"][s])
+            info["safety/fallback"] = bool(flat["fallback"][s])
+            info["safety/status_code"] = codes[s]
+
     def reset(self) -> VecEnvObs:
         seed, self._base_seed = self._base_seed, None
         obs, infos = self.venv.reset(seed=seed)
@@ -487,6 +500,8 @@ class VectorEnvVecEnv(VecEnv):
         done_copy = vinfos["_final_obs"]
         dones = np.repeat(done_copy, N)
         infos = self._infos(vinfos["metrics"])
+        if "safety" in vinfos:  # a vector safety filter: its per-robot report, flat
+            self._add_safety(infos, vinfos["safety"])
         time_limit = (trunc & ~term).reshape(-1)
         if done_copy.any():
             final = vinfos["final_obs"].reshape(self.num_envs, *self._obs_shape)

@@ -433,10 +433,17 @@ def test_make_training_vec_env_picks_the_adapter():
         2, lambda: build_env("crossing", {"n_agents": N, "max_cycles": 11}), normalize=False
     )
     assert isinstance(adapter, VectorEnvVecEnv) and adapter.venv.max_cycles == 11
+    from fov_marl.wrappers import VectorSafetyFilterWrapper
+
+    adapter, _ = make_training_vec_env(
+        2, lambda: build_env("coverage", {"n_agents": N}, safety_filter=True), normalize=False
+    )
+    assert isinstance(adapter, VectorEnvVecEnv)
+    assert isinstance(adapter.venv, VectorSafetyFilterWrapper)
     built = []
 
     def wrapped():
-        built.append(build_env("coverage", {"n_agents": N}, safety_filter=True))
+        built.append(build_env("coverage", {"n_agents": N}, belief=True))
         return built[-1]
 
     adapter, _ = make_training_vec_env(2, wrapped, normalize=False)
@@ -448,6 +455,40 @@ def test_make_training_vec_env_picks_the_adapter():
         1, lambda: build_env("coverage", {"n_agents": N}), eta_method="strip"
     )
     assert adapter.venv.eta_method == "strip"
+
+
+def test_filtered_vector_adapter_matches_per_copy_filters_slot_by_slot():
+    """Training behind the filter: one VectorSafetyFilterWrapper over the vector env gives
+    the per-copy SafetyFilterWrappers' observations, rewards, dones and safety reports
+    (actions within 1e-6, so observations within float32 round-off) across auto-resets."""
+    from fov_marl.infos import metrics_of, safety_of
+    from fov_marl.training.trainer import build_env, make_training_vec_env
+
+    cfg = {"n_agents": N, "max_cycles": 9, "arena_size_m": 10.0, "density_mean_m": (5.0, 5.0)}
+    ours, _ = make_training_vec_env(
+        3, lambda: build_env("coverage", cfg, safety_filter=True), normalize=False
+    )
+    ref = make_parallel_vec_env(lambda: build_env("coverage", cfg, safety_filter=True), 3)
+    ours.seed(11)
+    ref.seed(11)
+    np.testing.assert_allclose(ours.reset(), ref.reset(), atol=1e-5)
+    rng = np.random.default_rng(2)
+    dones = changed = 0
+    for _ in range(20):
+        act = _actions(rng, ours, scale=1.0)
+        oa, ra, da, ia = ours.step(act)
+        ob, rb, db, ib = ref.step(act)
+        np.testing.assert_allclose(oa, ob, atol=1e-4)
+        np.testing.assert_allclose(ra, rb, atol=1e-4)
+        np.testing.assert_array_equal(da, db)
+        for x, y in zip(ia, ib, strict=True):
+            sx, sy = safety_of(x), safety_of(y)
+            np.testing.assert_allclose(sx["applied_action"], sy["applied_action"], atol=1e-5)
+            assert sx["intervened"] == sy["intervened"] and sx["status"] == sy["status"]
+            assert metrics_of(x)["collisions_total"] == metrics_of(y)["collisions_total"]
+            changed += int(sx["intervened"])
+        dones += int(da.sum())
+    assert dones >= 2 * ours.num_envs and changed > 0
 
 
 def test_ppo_on_the_vector_adapter_equals_ppo_on_the_parallel_adapter():
