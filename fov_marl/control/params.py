@@ -82,6 +82,9 @@ field                        default   source / reason
                                        that turned away from a neighbour seen 2.8 m off
                                        backed blind into it 7 s later; the belief's mean
                                        had drifted 14 m away with the coverage mode
+``last_seen_max_age_s``      1e6       ... and while it is younger than this (s); no
+                                       limit by default: with 10 s the head-on regression
+                                       episode 1 (N = 12, β = 120°) collided again
 ``blind_travel_m``           0.0       B: how far a robot may get (net displacement)
                                        from where it last looked along its direction
                                        of travel before it must look there
@@ -229,6 +232,7 @@ class ControllerParams:
         blind_density_risk: Gaussian-mass threshold of the density blind rows, [0, 1).
         last_seen_radius_m: range (m) within which a lost neighbour's last-seen
             point keeps its row, [0, 100]; 0 disables.
+        last_seen_max_age_s: age (s) after which a last-seen point is released, (0, 1e6].
         blind_travel_m: B in [0, 100] (m), the blind travel budget; 0 disables.
         blind_travel_memory_s: T in (0, 1e6] (s), the leak of the blind travel.
         walls: add the arena walls as rows.
@@ -287,6 +291,7 @@ class ControllerParams:
     blind_risk: float = 0.0
     blind_density_risk: float = 0.02
     last_seen_radius_m: float = 5.0
+    last_seen_max_age_s: float = 1e6
     blind_travel_m: float = 0.0
     blind_travel_memory_s: float = 30.0
     walls: bool = True
@@ -362,6 +367,7 @@ class ControllerParams:
         _check("wall_gain", self.wall_gain, 0.0, 1e3, lo_open=True)
         _check("blind_density_risk", self.blind_density_risk, 0.0, 1.0)
         _check("last_seen_radius_m", self.last_seen_radius_m, 0.0, 100.0)
+        _check("last_seen_max_age_s", self.last_seen_max_age_s, 0.0, 1e6, lo_open=True)
         _check("blind_travel_m", self.blind_travel_m, 0.0, 100.0)
         _check("blind_travel_memory_s", self.blind_travel_memory_s, 0.0, 1e6, lo_open=True)
         _check("deadlock_turn_deg", self.deadlock_turn_deg, 0.0, 180.0)

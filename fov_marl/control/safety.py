@@ -118,8 +118,10 @@ camera's view, the row
 with τ the time since the last detection: approach the point only while the disk the
 neighbour can have reached since lies beyond D_s, never afterwards, and never be
 pushed by it. A point inside the camera's view is released (the camera shows the
-neighbour is not there). Only the direction towards the point is forbidden: the robot
-may still move away from it, sideways, or forward where it looks.
+neighbour is not there); so is a point older than ``last_seen_max_age_s`` (no limit
+by default: with 10 s the head-on regression episode 1 collided again). Only the
+direction towards the point is forbidden: the robot may still move away from it,
+sideways, or forward where it looks.
 
 2d. Blind travel budget ("look before you leap")
 -----------------------------------------------
@@ -376,6 +378,7 @@ def last_seen_rows(
     v_max_mps: float,
     fov_rad: float,
     detection_range_m: float,
+    max_age_s: float = math.inf,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Rows towards lost neighbours' last-seen points (Section 2c of the module docstring).
 
@@ -388,6 +391,7 @@ def last_seen_rows(
         reach_sigma_m: ``z σ_meas`` (m), the uncertainty of the last detection.
         v_max_mps: the neighbour's top speed (m/s).
         fov_rad, detection_range_m: the camera (a point it sees is released).
+        max_age_s: a point older than this (s) is released.
 
     Returns:
         ``(n (R, M, 2) unit directions, h (R, M) m)`` with ``h = +inf`` where there is
@@ -399,7 +403,7 @@ def last_seen_rows(
     valid = np.isfinite(r) & ~np.asarray(detected, dtype=bool) & (r < radius_m) & (r > 1e-9)
     bearing = np.arctan2(c[..., 1], c[..., 0])
     in_view = (np.abs(bearing) <= 0.5 * fov_rad) & (r <= detection_range_m)
-    on = valid & ~in_view
+    on = valid & ~in_view & (np.asarray(age_s, dtype=np.float64) <= max_age_s)
     safe_r = np.where(on, r, 1.0)
     n = np.where(on[..., None], c / safe_r[..., None], 0.0)
     reach = reach_sigma_m + v_max_mps * np.asarray(age_s, dtype=np.float64)
@@ -530,6 +534,7 @@ def team_safety_rows(
         last_seen_body=last_seen_body if use_last else None,
         last_seen_age_s=last_seen_age_s if use_last else None,
         last_seen_radius_m=params.last_seen_radius_m,
+        last_seen_max_age_s=params.last_seen_max_age_s,
         reach_sigma_m=risk_quantile(params.safety_risk) * float(max(config.meas_std[:2])),
         detection_range_m=config.detection_range_m,
         blind_travel_body=blind_travel_body if blind else None,
@@ -586,6 +591,7 @@ def safety_rows(
     last_seen_body: np.ndarray | None = None,
     last_seen_age_s: np.ndarray | None = None,
     last_seen_radius_m: float = 0.0,
+    last_seen_max_age_s: float = math.inf,
     reach_sigma_m: float = 0.0,
     detection_range_m: float = math.inf,
     blind_travel_body: np.ndarray | None = None,
@@ -688,6 +694,7 @@ def safety_rows(
             v_max_mps=v_max_mps,
             fov_rad=fov_rad,
             detection_range_m=detection_range_m,
+            max_age_s=last_seen_max_age_s,
         )
         on = np.isfinite(h_c)
         h = np.where(on, h_c - safety_distance_m - m_arc, np.inf)
