@@ -536,7 +536,7 @@ class PfCbfPipeline:
         unchanged otherwise (and for the oracle, or with the budget disabled).
         """
         par = self.controller_params
-        if self.estimates != "tracker" or par.blind_travel_m <= 0.0:
+        if not self.use_cbf or self.estimates != "tracker" or par.blind_travel_m <= 0.0:
             return u_star
         e = self._blind_travel_body()
         r = np.hypot(e[:, 0], e[:, 1])

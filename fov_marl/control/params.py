@@ -89,8 +89,9 @@ field                        default   source / reason
                                        from where it last looked along its direction
                                        of travel before it must look there
                                        (:func:`~fov_marl.control.safety.
-                                       blind_travel_step`); 0 disables (pfcbf's
-                                       default; the safety filter uses 1.0 m)
+                                       blind_travel_step`); 0 disables (the
+                                       safety filter and pfcbf in coverage use
+                                       1.0 m; pfcbf in crossing 0)
 ``blind_travel_memory_s``    30.0      T: time constant (s) of the leak of the blind
                                        travel (jitter is forgiven, persistence is not)
 ``walls``                    True      arena walls as rows (the commanded velocity is the

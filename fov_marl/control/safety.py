@@ -139,8 +139,9 @@ zeroes ``e`` when its bearing comes within the camera's view), and the row
     n_e · v ≤ max(0, (B − ‖e‖) / dt),     n_e = e / ‖e‖ in Σ_i,   B = ``blind_travel_m``
 
 lets it get at most ``B`` further from where it last looked along that direction
-(``SafetyFilterWrapper``'s default B = 1 m; off for the scripted ``pfcbf``, whose laws
-do not drive blind persistently and whose crossing robots it stalled).
+(B = 1 m for ``SafetyFilterWrapper`` and for ``pfcbf`` in coverage, where dense teams
+slid blind into neighbours never seen; off for ``pfcbf`` in crossing, whose robots it
+stalled: :data:`fov_marl.baselines.pfcbf.PFCBF_COVERAGE_DEFAULTS`).
 Net displacement, not path length: jitter cancels, and moving back undoes travel.
 ``e`` leaks with time constant ``T`` (``blind_travel_memory_s``, 30 s: the creep it
 allows, ``B (1 − λ) / dt`` with ``λ = e^{−dt/T}``, is 0.03 m/s). When ``‖e‖ ≥ ¾ B`` and

@@ -63,10 +63,10 @@ The controller defaults are :class:`~fov_marl.control.ControllerParams`' except
 :data:`FILTER_CONTROLLER_DEFAULTS`: no "keep right" deadlock steering, which would
 add a behaviour of the filter's own to the policy's; and the blind travel budget
 (``blind_travel_m = 1`` m, :mod:`fov_marl.control.safety` Section 2d): an arbitrary
-policy may drive persistently into space its robot has not looked at, which the
-scripted ``pfcbf`` laws do not (there the budget is off: it stopped crossing robots that
-keep their neighbours in view while sliding sideways to their targets; measured, 4
-crossing seeds: 1-3 of 4 arrivals with it, 4 of 4 in 33 s without).
+policy may drive persistently into space its robot has not looked at (``pfcbf`` uses
+it in coverage too, not in crossing, where it stopped robots that keep their
+neighbours in view while sliding sideways to their targets; measured, 4 crossing
+seeds: 1-3 of 4 arrivals with it, 4 of 4 in 33 s without).
 
 The particle filters start from the true start poses (the paper's assumption,
 VII-B) read from ``env.unwrapped.poses`` at reset; pass ``init="uniform"`` to avoid

@@ -97,3 +97,24 @@ def test_policy_draws_particles_and_ellipses_into_the_frame():
     env.add_render_layer(pol.draw)
     drawn = env.render()
     assert np.abs(drawn.astype(int) - plain.astype(int)).sum() > 1000
+
+
+def test_pfcbf_uses_the_blind_travel_budget_in_coverage_only():
+    """PFCBF_COVERAGE_DEFAULTS: the budget is on for pfcbf in coverage (dense teams slid
+    blind into neighbours never seen), off in crossing and for lloyd-pf (no CBF); a dict
+    override wins, a ControllerParams is used as given."""
+    from fov_marl.baselines import make_policy
+    from fov_marl.control import ControllerParams
+    from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
+
+    cov = fov_coverage_v0.parallel_env(n_agents=3)
+    cross = fov_crossing_v0.parallel_env(n_agents=4)
+
+    def budget(pol):
+        return pol.pipeline.controller_params.blind_travel_m
+
+    assert budget(make_policy("pfcbf", cov)) == 1.0
+    assert budget(make_policy("pfcbf", cross)) == 0.0
+    assert budget(make_policy("lloyd-pf", cov)) == 0.0
+    assert budget(make_policy("pfcbf", cov, controller_params={"blind_travel_m": 0.5})) == 0.5
+    assert budget(make_policy("pfcbf", cov, controller_params=ControllerParams())) == 0.0
