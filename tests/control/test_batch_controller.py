@@ -136,7 +136,8 @@ def test_batched_equals_loop_property(seed, R, M):
     rng = np.random.default_rng(seed)
     u, p, v, d, ids, det = _instances(rng, R, M, spread=rng.uniform(2.0, 15.0))
     rows = _rows(cfg, params, p, det, rng, with_pose=bool(rng.random() < 0.7))
-    assert_same(cfg, params, u, p, v, d, ids, rows, det)
+    # equal, or a degenerate tie in which both solutions are safe (see assert_same)
+    assert_same(cfg, params, u, p, v, d, ids, rows, det, max_ties=1)
 
 
 def test_invalid_inputs_and_no_neighbours():
