@@ -34,8 +34,9 @@ __all__ = ["PipelinePolicy", "PFCBF_COVERAGE_DEFAULTS"]
 #: :class:`ControllerParams`'s defaults (dict overrides are applied on top): the blind
 #: travel budget (:mod:`fov_marl.control.safety` Section 2d). Measured, pfcbf in the 40 m
 #: arena, N = 48: without it 2 collision events in seeds 0-3 (seed 3: min 0.03 m, a robot
-#: sliding blind into a neighbour it had never seen); with it seeds 1 and 3 have none
-#: (min 2.40 and 2.23 m), and at N = 6 (seeds 0-3) η stays within 0.3% of ``ideal``.
+#: sliding blind into a neighbour it had never seen); with it seeds 0-4 have none (min
+#: 2.13 m), nor N = 12 seeds 0-9 or N = 24 seeds 0-5, and at N = 6 (seeds 0-3) η stays
+#: within 0.3% of ``ideal``.
 #: Not in the crossing scenario: there it stalled robots that slide sideways to their
 #: targets while the FoV levels keep their neighbours in view (1-3 of 4 arrivals).
 PFCBF_COVERAGE_DEFAULTS: dict[str, Any] = {"blind_travel_m": 1.0}
