@@ -64,7 +64,7 @@ from fov_marl.control.safety import (
     team_safety_rows,
 )
 from fov_marl.estimation import TrackerParams, VectorTrackerBank
-from fov_marl.geometry import relative_pose
+from fov_marl.geometry import body_to_world, relative_pose, world_to_body
 from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, ObservationLayout, velocity_to_action
 
 __all__ = ["PfCbfPipeline"]
@@ -331,31 +331,18 @@ class PfCbfPipeline:
     def _update_last_seen(self) -> None:
         """Carry the detected neighbours' estimates into Σ_w as their last-seen points."""
         det = self._est["detected"]
-        mu = self._est["mean_body"]
-        th = self._own_pose[:, 2:3]
-        c, s = np.cos(th), np.sin(th)
-        pw = np.stack(
-            [
-                self._own_pose[:, 0:1] + c * mu[..., 0] - s * mu[..., 1],
-                self._own_pose[:, 1:2] + s * mu[..., 0] + c * mu[..., 1],
-            ],
-            -1,
-        )
+        pw = body_to_world(self._est["mean_body"], self._own_pose[:, None, :])
         self._last_seen_world = np.where(det[..., None], pw, self._last_seen_world)
 
     def _last_seen_body(self) -> np.ndarray:
         """``(B N, N − 1, 2)`` the last-seen points in each robot's Σ_i (NaN: never seen)."""
-        d = self._last_seen_world - self._own_pose[:, None, :2]
-        th = self._own_pose[:, 2:3]
-        c, s = np.cos(th), np.sin(th)
-        return np.stack([c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]], -1)
+        return world_to_body(self._last_seen_world, self._own_pose[:, None, :])
 
     def _blind_travel_body(self) -> np.ndarray:
         """``(B N, 2)`` each robot's blind travel ``e`` in its Σ_i (m)."""
-        e = self._blind_travel_world
-        th = self._own_pose[:, 2]
-        c, s = np.cos(th), np.sin(th)
-        return np.stack([c * e[:, 0] + s * e[:, 1], -s * e[:, 0] + c * e[:, 1]], -1)
+        heading = np.zeros_like(self._own_pose)
+        heading[:, 2] = self._own_pose[:, 2]  # a displacement: rotate only
+        return world_to_body(self._blind_travel_world, heading)
 
     def _known_init(self, init_all: np.ndarray | None) -> np.ndarray | None:
         init = init_all if self.init == "known" else None

@@ -179,6 +179,7 @@ from scipy.special import ndtri
 
 from fov_marl.config import ScenarioConfig
 from fov_marl.control.params import ControllerParams
+from fov_marl.geometry import body_to_world
 
 __all__ = [
     "ROW_NEIGHBOUR",
@@ -431,9 +432,9 @@ def blind_travel_step(
     Returns:
         ``(R, 2)`` the new ``e`` (m).
     """
-    v = np.asarray(v_body, dtype=np.float64)
-    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
-    d = np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], -1) * dt_s
+    heading = np.zeros((len(yaw_rad), 3))
+    heading[:, 2] = yaw_rad  # a displacement: rotate only
+    d = body_to_world(np.asarray(v_body, dtype=np.float64) * dt_s, heading)
     lam = math.exp(-dt_s / memory_s) if math.isfinite(memory_s) else 1.0
     return lam * np.asarray(e_world, dtype=np.float64) + d
 
