@@ -516,6 +516,20 @@ class PfCbfPipeline:
         self.last_timings["lloyd"] = time.perf_counter() - t0
         return np.asarray(u, dtype=np.float64).reshape(R, 3)
 
+    def _fov_yield(self, e: dict[str, np.ndarray]) -> np.ndarray | None:
+        """``(R, M)`` neighbours whose FoV rows may yield when they stall their robot.
+
+        Those not detected for at least ``controller_params.lost_fov_age_s`` (see
+        :meth:`fov_marl.control.FovCbfController._yield_lost`); None when
+        ``lost_fov_yield`` is off or without tracker estimates (oracle, belief-free).
+        """
+        p = self.controller_params
+        age = e.get("time_since_seen_s")
+        det = e.get("detected")
+        if not p.lost_fov_yield or age is None or det is None:
+            return None
+        return ~np.asarray(det, dtype=bool) & (np.asarray(age) >= p.lost_fov_age_s)
+
     def _look_before_leap(self, u_star: np.ndarray) -> np.ndarray:
         """Turn a robot that has spent most of its blind travel budget towards it.
 
@@ -574,6 +588,7 @@ class PfCbfPipeline:
             rows = self.safety_rows() if ellipse else None
             self.last_timings["safety_rows"] = time.perf_counter() - t_rows
             det = e.get("detected")
+            fov_yield = self._fov_yield(e)
             if self.batched is not None:
                 res = self.batched.solve(
                     u_star,
@@ -583,6 +598,7 @@ class PfCbfPipeline:
                     e["ids"],
                     safety=rows,
                     detected=det,
+                    fov_yield=fov_yield,
                 )
                 results: Sequence[ControlResult | None] = _LazyResults(res, R)
             else:
@@ -597,6 +613,7 @@ class PfCbfPipeline:
                             e["ids"][i],
                             safety=None if rows is None else rows.robot(i),
                             detected=det[i] if det is not None else None,
+                            fov_yield=None if fov_yield is None else fov_yield[i],
                         )
                     )
                 res = BatchControlResult.from_results(out, time.perf_counter() - t_rows)

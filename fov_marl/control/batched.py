@@ -279,6 +279,7 @@ class BatchedFovCbfController:
         ids: np.ndarray | None = None,
         safety: SafetyRows | tuple | None = None,
         detected: np.ndarray | None = None,
+        fov_yield: np.ndarray | None = None,
     ) -> BatchControlResult:
         """``FovCbfController.solve`` for every robot (arguments with a leading robot axis).
 
@@ -286,7 +287,8 @@ class BatchedFovCbfController:
             u_star: ``(R, 3)``; p_body, v_est_body: ``(R, M, 2)``; d: ``(R, M)``;
             ids: ``(R, M)`` tie-breakers (default ``arange(M)``); safety: the robots'
             :class:`~fov_marl.control.safety.SafetyRows` (or ``(A (R,K,3), b (R,K),
-            kind (R,K))``; None: from ``p_body`` as exact); detected: ``(R, M)`` bool or None.
+            kind (R,K))``; None: from ``p_body`` as exact); detected: ``(R, M)`` bool or None;
+            fov_yield: ``(R, M)`` bool or None (see ``FovCbfController.solve``).
 
         Raises:
             ValueError: shapes that do not match.
@@ -317,8 +319,14 @@ class BatchedFovCbfController:
             detected = np.asarray(detected, dtype=bool)
             if detected.shape != (R, M):
                 raise ValueError(f"detected must have shape ({R}, {M}), got {detected.shape}")
+        if fov_yield is not None:
+            fov_yield = np.asarray(fov_yield, dtype=bool)
+            if fov_yield.shape != (R, M):
+                raise ValueError(f"fov_yield must have shape ({R}, {M}), got {fov_yield.shape}")
         if p.qp_backend != "nnls":
-            return self._solve_loop(u_star, p_body, v_est_body, d, ids, safety, detected, t0)
+            return self._solve_loop(
+                u_star, p_body, v_est_body, d, ids, safety, detected, t0, fov_yield
+            )
         self.stats["steps"] += R
         finite = (
             np.isfinite(u_star).all(1)
@@ -406,6 +414,11 @@ class BatchedFovCbfController:
             qres = self._qp_solve(Aq, bq, lv, actq, usq)
             if K and p.deadlock_turn_deg > 0.0:
                 self._unblock(qres, Aq, bq, lv, actq, usq, n_fov_slots, skeep[qi])
+            if fov_yield is not None and fov_yield[qi].any():
+                lost = np.zeros(actq.shape, dtype=bool)
+                fov_slot = np.tile(_FOV_ROWS, M)  # never an Eq. 12 safety row
+                lost[:, : M * 4] = np.repeat(fov_yield[qi], 4, axis=1) & actq[:, : M * 4] & fov_slot
+                self._yield_lost(qres, Aq, bq, lv, actq, usq, lost)
             res_u[qi] = qres.u
             kq = np.where(actq, qres.kappa, 0.0)
             kappa[qi] = kq[:, : M * 4].reshape(nq, M, 4)
@@ -502,6 +515,33 @@ class BatchedFovCbfController:
                 qres.u = arr
             arr[w] = getattr(alt, f)[use]
 
+    def _yield_lost(self, qres, Aq, bq, lv, actq, usq, lost) -> None:
+        """:meth:`FovCbfController._yield_lost` for the robots that need it (in place on qres)."""
+        vs = usq[:, :2]
+        speed = np.hypot(vs[:, 0], vs[:, 1])
+        u = qres.u
+        cand = lost.any(axis=1) & ~qres.fallback & (speed >= 0.1 * self.config.v_max_mps)
+        cand &= np.einsum("rk,rk->r", u[:, :2], vs) < 0.2 * speed * speed
+        if not cand.any():
+            return
+        c_i = np.flatnonzero(cand)
+        alt = self._qp_solve(Aq[c_i], bq[c_i], lv[c_i], actq[c_i] & ~lost[c_i], usq[c_i])
+        wt = np.array([1.0, 1.0, self._w * self._w])
+        cost_cur = ((u[c_i] - usq[c_i]) ** 2) @ wt
+        cost_alt = ((alt.u - usq[c_i]) ** 2) @ wt
+        use = ~alt.fallback & (cost_alt <= 0.5 * cost_cur)
+        if not use.any():
+            return
+        w = c_i[use]
+        alt.n_qp = alt.n_qp + qres.n_qp[c_i]
+        alt.kappa = np.where(lost[c_i], 0.0, alt.kappa)
+        for f in ("u", "kappa", "status", "qp_status", "fallback", "n_qp", "n_levels"):
+            arr = getattr(qres, f)
+            if f == "u" and arr is u:
+                arr = arr.copy()
+                qres.u = arr
+            arr[w] = getattr(alt, f)[use]
+
     def _safe_fallback(self, u_qp, A, b, kind, keep) -> np.ndarray:
         """:meth:`FovCbfController._safe_fallback` for ``(F,)`` robots (u_qp NaN rows: None)."""
         cfg = self.config
@@ -524,7 +564,7 @@ class BatchedFovCbfController:
             out[anyw, 2] = om[anyw]
         return out
 
-    def _solve_loop(self, u_star, p_body, v_est, d, ids, safety, detected, t0):
+    def _solve_loop(self, u_star, p_body, v_est, d, ids, safety, detected, t0, fov_yield=None):
         """One per-robot controller per robot (the osqp backend)."""
         R = u_star.shape[0]
         while len(self._loop) < R:
@@ -539,6 +579,7 @@ class BatchedFovCbfController:
                     u_star[i], p_body[i], v_est[i], d[i], ids[i],
                     safety=None if safety is None else safety.robot(i),
                     detected=None if detected is None else detected[i],
+                    fov_yield=None if fov_yield is None else fov_yield[i],
                 )
             )  # fmt: skip
         for k in self.stats:

@@ -363,6 +363,46 @@ class FovCbfController:
             return qres
         return alt
 
+    def _yield_lost(self, qres, A_q, b_q, l_q, u_star: np.ndarray, lost: np.ndarray):
+        """Lost neighbours' FoV levels yield when they stall the robot (``params.lost_fov_yield``).
+
+        Not in the paper. A neighbour the camera does not report keeps its FoV rows
+        (Eq. 17, in recovery by turning, see :mod:`~fov_marl.control.cbf`), built on a
+        belief that spreads while it is unseen. Several such neighbours around a robot
+        can pin its yaw rate to ~0 while the collision rows forbid the blind
+        translation u* asks for: the robot then stands still for good (crossing seed 7:
+        7 m from its target, three neighbours lost 25-50 s before). When the solution
+        keeps less than a fifth of u*'s translation (``u_v · v̂* < 0.2 ‖v*‖``, with
+        ``‖v*‖ ≥ 0.1 v_max``; never for a fallback), the hierarchy is solved again
+        without the FoV rows of the undetected neighbours (``lost``, rows of the QP), and
+        that solution is used if its QP cost ``‖Δv‖² + λ² Δω²`` to u* is at most half the
+        first one's. Only FoV rows are dropped: the collision rows (safety level) and the
+        FoV rows of the neighbours in view are the same, so the robot is exactly as safe.
+
+        Returns:
+            the QP result to use (κ of the dropped rows is 0).
+        """
+        vs = u_star[:2]
+        speed = math.hypot(vs[0], vs[1])
+        if not lost.any() or qres.fallback or speed < 0.1 * self.config.v_max_mps:
+            return qres
+        if qres.u[:2] @ vs >= 0.2 * speed * speed:
+            return qres
+        keep = ~lost
+        alt = self._qp_solve(A_q[keep], b_q[keep], l_q[keep], u_star)
+        if alt.fallback:
+            return qres
+        wt = np.array([1.0, 1.0, self._w * self._w])
+        cost_cur = float(((qres.u - u_star) ** 2) @ wt)
+        cost_alt = float(((alt.u - u_star) ** 2) @ wt)
+        if cost_alt > 0.5 * cost_cur:
+            return qres
+        kappa = np.zeros(b_q.shape[0])
+        kappa[keep] = alt.kappa
+        alt.kappa = kappa
+        alt.n_qp += qres.n_qp
+        return alt
+
     def _safe_fallback(
         self, u_qp: np.ndarray | None, A: np.ndarray, b: np.ndarray, kind: np.ndarray
     ) -> np.ndarray:
@@ -399,6 +439,7 @@ class FovCbfController:
         ids: np.ndarray | None = None,
         safety: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
         detected: np.ndarray | None = None,
+        fov_yield: np.ndarray | None = None,
     ) -> ControlResult:
         """Safe input closest to u* (Eq. 19) under the hierarchy of Eq. 18.
 
@@ -416,6 +457,9 @@ class FovCbfController:
                 ``"mean"``.
             detected: ``(M,)`` bool, neighbours in the last camera report (None: all),
                 for ``params.search_by_turning`` (see :func:`~fov_marl.control.cbf.cbf_rows`).
+            fov_yield: ``(M,)`` bool, neighbours whose FoV rows yield when they stall
+                the robot (:meth:`_yield_lost`; the pipeline passes the neighbours lost
+                for at least ``params.lost_fov_age_s``); None: never.
 
         Returns:
             :class:`ControlResult`. Non-finite inputs and solver failures give a
@@ -519,6 +563,10 @@ class FovCbfController:
         qres = self._qp_solve(A_q, b_q, l_q, u_star)
         if sb.size and p.deadlock_turn_deg > 0.0:
             qres = self._unblock(qres, A_q, b_q, l_q, u_star, n_fov)
+        if fov_yield is not None:
+            lost = np.zeros(b_q.shape[0], dtype=bool)
+            lost[: jj.size] = np.asarray(fov_yield, dtype=bool).reshape(-1)[jj] & (rr != SAFETY_ROW)
+            qres = self._yield_lost(qres, A_q, b_q, l_q, u_star, lost)
         kappa[jj, rr] = qres.kappa[: jj.size]
         u = qres.u
         status, fallback = qres.status, qres.fallback

@@ -102,6 +102,17 @@ field                        default   source / reason
                                        FovCbfController._unblock`): four crossing robots
                                        otherwise stop for good at the centre (VII-D,
                                        seed 0); 0 disables (the safety filter's default)
+``lost_fov_yield``           True      the FoV levels of neighbours the camera does not
+                                       report yield when they stall the robot
+                                       (:meth:`~fov_marl.control.controller.
+                                       FovCbfController._yield_lost`): a crossing robot
+                                       otherwise stood 7 m from its target for 150 s,
+                                       pinned by three neighbours lost 25-50 s before
+                                       (seed 7); the collision rows stay
+``lost_fov_age_s``           10.0      a neighbour counts as lost after this long unseen
+                                       (s); yielding the FoV rows of every undetected
+                                       neighbour slowed crossing (median arrival 58 s
+                                       against 33 s, 20 seeds)
 ``omega_weight``             1.0       λ: Eq. 18-19 minimise ``‖Δv‖² + λ² Δω²``
                                        (λ in s·m/rad... i.e. 1 rad/s of turning costs as
                                        much as λ m/s of translation); 1 is the paper's
@@ -240,6 +251,11 @@ class ControllerParams:
         wall_gain: γ_w (1/s) of the wall rows, (0, 1e3].
         deadlock_turn_deg: turn of u*'s translation (degrees, to the right) tried when
             the collision rows block it, in [0, 180]; 0 disables.
+        lost_fov_yield: when the robot is stalled (less than a fifth of u*'s
+            translation kept), solve again without the FoV rows of undetected
+            neighbours and use that solution if it is much closer to u*.
+        lost_fov_age_s: seconds unseen after which a neighbour's FoV rows may yield,
+            [0, 1e6].
         omega_weight: λ in (0, 10], weight of the yaw rate in the QP metric.
         safety_first: all safety rows form the top cascade level.
         safety_hard: safety rows are hard constraints (no κ); infeasible → brake.
@@ -298,6 +314,8 @@ class ControllerParams:
     walls: bool = True
     wall_gain: float = 2.5
     deadlock_turn_deg: float = 60.0
+    lost_fov_yield: bool = True
+    lost_fov_age_s: float = 10.0
     omega_weight: float = 1.0
     safety_first: bool = True
     safety_hard: bool = False
@@ -343,6 +361,7 @@ class ControllerParams:
             "prune",
             "motion_cone",
             "walls",
+            "lost_fov_yield",
         ):
             _check_bool(name, getattr(self, name))
         _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)
@@ -372,6 +391,7 @@ class ControllerParams:
         _check("blind_travel_m", self.blind_travel_m, 0.0, 100.0)
         _check("blind_travel_memory_s", self.blind_travel_memory_s, 0.0, 1e6, lo_open=True)
         _check("deadlock_turn_deg", self.deadlock_turn_deg, 0.0, 180.0)
+        _check("lost_fov_age_s", self.lost_fov_age_s, 0.0, 1e6)
         _check("omega_weight", self.omega_weight, 0.0, 10.0, lo_open=True)
         _check("safety_speed_margin_mps", self.safety_speed_margin_mps, 0.0, 100.0)
         _check("cone_half_angle_deg", self.cone_half_angle_deg, 0.0, 179.0, lo_open=True)

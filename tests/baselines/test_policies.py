@@ -87,6 +87,16 @@ def test_pfcbf_crossing_all_reach_targets_without_collision(seed):
     assert rec.min_distance > 1.5, rec  # well clear of contact (1 m)
 
 
+def test_pfcbf_crossing_seed_7_arrives_lost_fov_rows_yield():
+    """Seed 7 stalled one robot 7 m from its target for the rest of the episode: three
+    neighbours lost 25-50 s before held its yaw rate at ~0 while blind rows blocked the
+    backing u* asked for. ``lost_fov_yield`` lets their FoV rows yield (the slow test in
+    tests/test_safety_acceptance.py shows it does not arrive without)."""
+    rec = run_episode("crossing", "pfcbf", 7, n_agents=4)
+    assert rec.arrived == 4 and rec.collisions == 0 and rec.safety_violations == 0, rec
+    assert rec.time_to_arrival_s < 100.0, rec
+
+
 def test_policy_draws_particles_and_ellipses_into_the_frame():
     env = fov_crossing_v0.parallel_env(render_mode="rgb_array")
     obs, _ = env.reset(seed=0)

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from fov_marl.config import make_config
 from fov_marl.control import ControllerParams, FovCbfController
 from fov_marl.control.batched import BatchedFovCbfController
-from fov_marl.control.safety import team_safety_rows
+from fov_marl.control.safety import SafetyRows, team_safety_rows
 
 
 def _instances(rng, R, M, spread=8.0):
@@ -60,13 +60,13 @@ def _tie(s, r, safety, i, tol=1e-3):
     return bool(np.all(A @ s.u + b >= -tol) and np.all(A @ r.u + b >= -tol))
 
 
-def assert_same(cfg, params, u, p, v, d, ids, safety, det, max_ties=0):
+def assert_same(cfg, params, u, p, v, d, ids, safety, det, max_ties=0, fov_yield=None):
     """Batched result == per-robot results (1e-6, identical statuses and flags), except
     for at most ``max_ties`` robots whose solutions are degenerate ties (:func:`_tie`)."""
     R = u.shape[0]
     ties = 0
     batched = BatchedFovCbfController(cfg, params)
-    rb = batched.solve(u, p, v, d, ids, safety=safety, detected=det)
+    rb = batched.solve(u, p, v, d, ids, safety=safety, detected=det, fov_yield=fov_yield)
     ctrls = [FovCbfController(cfg, params) for _ in range(R)]
     statuses = []
     for i in range(R):
@@ -74,6 +74,7 @@ def assert_same(cfg, params, u, p, v, d, ids, safety, det, max_ties=0):
             u[i], p[i], v[i], d[i], None if ids is None else ids[i],
             safety=None if safety is None else safety.robot(i),
             detected=None if det is None else det[i],
+            fov_yield=None if fov_yield is None else fov_yield[i],
         )  # fmt: skip
         r = rb.robot(i)
         ctx = f"robot {i}: {s.status} vs {r.status}"
@@ -123,6 +124,9 @@ def test_batched_equals_loop_random(name, fov):
     # measured: 6 ties in 24,000 random robots ('filter', β = 220°), all on rows with
     # b = 0 from several sides; both solutions meet every collision row within 1e-3 m/s
     st1 = assert_same(cfg, params, u, p, v, d, ids, rows, det, max_ties=1)
+    # the lost neighbours' FoV rows may yield (pipeline: unseen >= lost_fov_age_s)
+    fy = ~det & (rng.random(det.shape) < 0.7)
+    assert_same(cfg, params, u, p, v, d, ids, rows, det, max_ties=1, fov_yield=fy)
     # standalone use: collision rows from p_body as exact
     st2 = assert_same(cfg, params, u, p, v, d, None, None, None)
     assert len(set(st1 + st2)) >= 2
@@ -136,8 +140,9 @@ def test_batched_equals_loop_property(seed, R, M):
     rng = np.random.default_rng(seed)
     u, p, v, d, ids, det = _instances(rng, R, M, spread=rng.uniform(2.0, 15.0))
     rows = _rows(cfg, params, p, det, rng, with_pose=bool(rng.random() < 0.7))
+    fy = ~det if rng.random() < 0.5 else None
     # equal, or a degenerate tie in which both solutions are safe (see assert_same)
-    assert_same(cfg, params, u, p, v, d, ids, rows, det, max_ties=1)
+    assert_same(cfg, params, u, p, v, d, ids, rows, det, max_ties=1, fov_yield=fy)
 
 
 def test_invalid_inputs_and_no_neighbours():
@@ -195,6 +200,34 @@ def test_deadlock_unblock_and_safety_fallback_paths():
     turned = np.abs(r_on.u - r_off.u).max(axis=1) > 1e-3
     assert turned.any()
     assert np.all(r_on.u[turned, 1] < r_off.u[turned, 1] + 1e-9)  # to the right
+
+
+def test_lost_fov_yield_batched_equals_loop_and_unpins():
+    """Crossing seed 7's pinned robot (three lost neighbours, backing blocked), 16 copies
+    with jitter: the batched yield equals the per-robot one and turns the robots."""
+    cfg = make_config(scenario="crossing", n_agents=4)
+    params = ControllerParams()
+    rng = np.random.default_rng(3)
+    R = 16
+    p = np.array([[15.0, 9.0], [-5.9, 9.9], [5.5, -10.1]]) + rng.normal(0, 0.3, (R, 3, 2))
+    v = -0.5 * p / np.linalg.norm(p, axis=-1, keepdims=True)
+    d = np.zeros((R, 3))
+    u = np.tile([-0.81, -0.59, -1.5], (R, 1))
+    n = np.array([[-1.0, 0.0], [-0.74, -0.67], [-0.55, -0.83]])
+    A = np.broadcast_to(np.column_stack([-n, np.zeros(3)]), (R, 3, 3)).copy()
+    b = np.tile([0.0, 0.0, 0.3], (R, 1))
+    kind = np.ones((R, 3), dtype=np.int8)
+    det = np.zeros((R, 3), dtype=bool)
+    rows = SafetyRows(A, b, kind, np.zeros((R, 3)))
+    fy = np.ones((R, 3), dtype=bool)
+    assert_same(cfg, params, u, p, v, d, None, rows, det, fov_yield=fy)
+    ctrl = BatchedFovCbfController(cfg, params)
+    pinned = ctrl.solve(u, p, v, d, safety=rows, detected=det)
+    freed = ctrl.solve(u, p, v, d, safety=rows, detected=det, fov_yield=fy)
+    # every copy keeps < 1/5 of u*'s translation; most cannot turn, some turn the wrong way
+    assert np.all(np.einsum("rk,rk->r", pinned.u[:, :2], u[:, :2]) < 0.2)
+    assert np.count_nonzero(np.abs(pinned.u[:, 2]) < 0.5) >= 4
+    assert np.all(freed.u[:, 2] < -1.0)  # freed: they turn as u* asks
 
 
 def test_osqp_backend_loops_per_robot():

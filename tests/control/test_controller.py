@@ -385,3 +385,36 @@ def test_default_fov_levels_turn_the_camera_and_leave_translation_to_u_star():
     assert _seen(log).all()
     turned = sum(r.u[2] for _, _, r in log) * CFG.dt_s
     assert turned < -0.05  # it turned right, towards j (which falls behind on its right)
+
+
+def _pinned_crossing_robot():
+    """Crossing seed 7, robot 2 at t = 60 s: three neighbours lost 25-30 s before (means
+    spread around it, inside their ellipses), backing towards its target blocked by blind
+    rows; u* backs and turns right."""
+    cfg = make_config(scenario="crossing", n_agents=4)
+    p = np.array([[15.0, 9.0], [-5.9, 9.9], [5.5, -10.1]])
+    v = -0.5 * p / np.linalg.norm(p, axis=1, keepdims=True)  # Eq. 22
+    n = np.array([[-1.0, 0.0], [-0.74, -0.67], [-0.55, -0.83]])
+    rows = (np.column_stack([-n, np.zeros(3)]), np.array([0.0, 0.0, 0.3]), np.ones(3, np.int8))
+    return cfg, np.array([-0.81, -0.59, -1.5]), p, v, np.zeros(3), rows
+
+
+def test_lost_neighbours_fov_rows_yield_when_they_stall_the_robot():
+    cfg, u, p, v, d, rows = _pinned_crossing_robot()
+    det = np.zeros(3, dtype=bool)
+    c = FovCbfController(cfg, ControllerParams())
+    pinned = c.solve(u, p, v, d, safety=rows, detected=det)
+    assert abs(pinned.u[2]) < 0.5 and pinned.u[:2] @ u[:2] < 0.2 * (u[:2] @ u[:2])
+    freed = c.solve(u, p, v, d, safety=rows, detected=det, fov_yield=~det)
+    np.testing.assert_allclose(freed.u, [0.0, 0.0, -1.5], atol=1e-6)  # turns as u* asks
+    A, b, _ = rows
+    assert np.all(A @ freed.u + b >= -1e-9)  # the collision rows still hold
+    assert freed.kappa.shape == (3, 4) and freed.kappa.max() == 0.0
+    # no neighbour allowed to yield: the pinned solution
+    none = c.solve(u, p, v, d, safety=rows, detected=det, fov_yield=np.zeros(3, bool))
+    np.testing.assert_array_equal(none.u, pinned.u)
+    # not stalled (u* already met): nothing changes
+    easy = np.array([0.5, 0.0, 0.0])
+    a = c.solve(easy, p, v, d, safety=rows, detected=det)
+    b_ = c.solve(easy, p, v, d, safety=rows, detected=det, fov_yield=~det)
+    np.testing.assert_array_equal(a.u, b_.u)
