@@ -60,7 +60,14 @@ an unseen neighbour runs the same rows and does not approach either, and the FoV
 levels turn the camera towards it (its d_ij is small). An undetected neighbour whose band covers the robot
 (``s_j ≤ 0``: long unseen, a large ellipse) gives no useful direction: fleeing its mean
 is what drove robots backwards, fast and blind, in dense teams. Its particles enter
-the blind rows instead.
+the blind rows instead. So do, with ``lost_sigma_max_m`` finite (the safety filter's
+default, 2 m), the undetected neighbours whose std along the line of sight
+``σ_n`` exceeds it: a diffuse belief's band reaches close to the robot long before
+the neighbour does, and its half-plane ``n · v ≤ 0`` then forbids half the
+directions. Measured (random actions behind the filter, N = 6, β = 120°, 2 x 300
+steps): such rows changed 14% of the robot-steps while the true nearest neighbour
+was a median 13.8 m away; without them 53% of the robot-steps are changed instead
+of 68%, and the adversarial sweeps stay collision-free.
 
 2. Blind rows: a speed bound per direction from the particles (Eq. 4)
 ====================================================================
@@ -541,6 +548,7 @@ def team_safety_rows(
         detection_range_m=config.detection_range_m,
         blind_travel_body=blind_travel_body if blind else None,
         blind_travel_m=params.blind_travel_m,
+        lost_sigma_max_m=params.lost_sigma_max_m,
     )
 
 
@@ -598,6 +606,7 @@ def safety_rows(
     detection_range_m: float = math.inf,
     blind_travel_body: np.ndarray | None = None,
     blind_travel_m: float = 0.0,
+    lost_sigma_max_m: float = math.inf,
 ) -> SafetyRows:
     """All collision rows of every robot (module docstring, Sections 1-3).
 
@@ -634,6 +643,9 @@ def safety_rows(
         h = s - safety_distance_m - m_arc
         det = np.asarray(detected, dtype=bool)
         keep = det | (s > 0.0)
+        if math.isfinite(lost_sigma_max_m):  # diffuse undetected beliefs: blind rows only
+            sigma_n = (np.hypot(mu[..., 0], mu[..., 1]) - s) / risk_quantile(safety_risk)
+            keep &= det | (sigma_n <= lost_sigma_max_m)
         A = np.zeros((R, M, 3))
         A[..., 0:2] = -n
         g = hold_band(h, hold_band_m)

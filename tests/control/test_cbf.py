@@ -414,6 +414,10 @@ def test_row_authority_closed_form():
         ("lloyd_grid_m", 0.0),
         ("lloyd_min_mass", 1.0),
         ("safety_first", 1),
+        ("lost_sigma_max_m", 0.0),
+        ("lost_sigma_max_m", float("nan")),
+        ("lost_fov_age_s", -1.0),
+        ("lost_fov_yield", 1),
     ],
 )
 def test_controller_params_validation_names_field(field, value):

@@ -169,6 +169,25 @@ def test_rows_of_a_detected_and_an_undetected_neighbour():
     assert b[1] == 0.0  # undetected, too close: hold
 
 
+def test_diffuse_undetected_neighbours_leave_their_half_plane_to_the_blind_rows():
+    """``lost_sigma_max_m``: an undetected neighbour whose std along the line of sight
+    exceeds it gets no neighbour row; a tight undetected one and a detected one, whatever
+    their spread, keep theirs."""
+    mean = np.array([[[8.0, 0.0], [0.0, 3.5], [0.0, -9.0]]])
+    cov = np.zeros((1, 3, 2, 2))
+    cov[0, 0] = np.diag([2.5**2, 1.0])  # along the line of sight: σ_n = 2.5 m
+    cov[0, 1] = np.diag([1.0, 0.3**2])  # σ_n = 0.3 m
+    cov[0, 2] = np.diag([1.0, 2.6**2])  # σ_n = 2.6 m, but detected
+    det = np.array([[False, False, True]])
+    kw = dict(mean_body=mean, cov_body=cov, detected=det, blind_bins=0, walls=False)
+    all_rows = _rows(**kw).robot(0)
+    cut = _rows(lost_sigma_max_m=2.0, **kw).robot(0)
+    assert len(all_rows[2]) == 3 and len(cut[2]) == 2
+    np.testing.assert_allclose(cut[0][:, :2], [[0.0, -1.0], [0.0, 1.0]], atol=1e-12)
+    loose = _rows(lost_sigma_max_m=2.6, **kw).robot(0)
+    assert len(loose[2]) == 3
+
+
 def test_blind_rows_slow_the_robot_only_towards_unseen_particles():
     """A cloud of an undetected neighbour 3 m behind: moving back is bounded, forward free."""
     rng = np.random.default_rng(0)
