@@ -690,8 +690,11 @@ class _BankCore:
     def particles_all(self) -> tuple[np.ndarray, np.ndarray]:
         """``(p_body (R, P, 2), owner (R, P) neighbour ID)`` of every row (new arrays)."""
         p = np.stack([self._x, self._y], -1)
-        local = self._gid.reshape(self._R, self._P) - (np.arange(self._R) * self._M)[:, None]
-        return p, np.take_along_axis(self._ids, local, axis=1) if self._M else local
+        if not self._M:
+            return p, np.zeros((self._R, self._P), dtype=np.int64)
+        # blocks are contiguous and in neighbour order: each ID repeated by its count
+        owner = np.repeat(self._ids.reshape(-1), self._counts.reshape(-1))
+        return p, owner.reshape(self._R, self._P)
 
     #: per-row state (leading row axis) replaced by :meth:`splice`
     _ROW_STATE = (
