@@ -1368,8 +1368,17 @@ class VectorTrackerBank:
         """``(p_body (B N, P_T, 2) m, owner (B N, P_T) neighbour ID)`` of every row, sorted
         by owner within a row (new arrays)."""
         self._check()
-        parts = [c.particles_all() for c in self._cores]
-        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+        R, P = self._R, self._P
+        pts = np.empty((R, P, 2))
+        for core, (s, e) in zip(self._cores, self._bounds, strict=True):
+            pts[s:e, :, 0] = core._x
+            pts[s:e, :, 1] = core._y
+        if not self._M:
+            return pts, np.zeros((R, P), dtype=np.int64)
+        # blocks are contiguous and in neighbour order: each ID repeated by its count
+        ids = np.concatenate([c._ids for c in self._cores])
+        counts = np.concatenate([c._counts for c in self._cores])
+        return pts, np.repeat(ids.reshape(-1), counts.reshape(-1)).reshape(R, P)
 
     def particles_body(self, row: int) -> tuple[np.ndarray, np.ndarray]:
         """``(p_body (P_T, 2), owner (P_T,))`` of row ``row`` (see :meth:`TrackerBank.particles_body`)."""
