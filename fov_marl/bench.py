@@ -7,13 +7,20 @@ in the same run, and the ratio; optionally ``vmas``, VMAS simple_spread on CPU w
 (particle-filter bank), ``control`` (Lloyd, cascade, final QP), ``controller``
 (the full pfcbf policy step: tracker + Lloyd + cascade + final QP) and
 ``vector_filter`` (the safety filter and pfcbf over B copies, one pipeline per copy
-against one batched pipeline, :func:`bench_batched_filter`). Every number
-the closing notes quote comes from here. Timings are wall-clock medians over
-repetitions on the current machine.
+against one batched pipeline, :func:`bench_batched_filter`; also at the reduced
+particle budget :data:`FAST_FILTER_PARTICLES`), ``issue12`` (the acceptance figures of
+the batched core side by side, from the rows of the same run: env ratio at N = 6,
+B = 64; filter ms per robot-step at B N = 384; PPO samples/s when measured) and, with
+``ppo=True`` (``fov-marl bench --ppo``), ``ppo`` (:func:`bench_ppo`: PPO samples/s
+with the default hyper-parameters, vector adapter against the per-copy adapter, with
+and without the safety filter). Every number the closing notes quote comes from here.
+Timings are wall-clock (best or median over repetitions) on the current machine; every
+row carries ``load_1min`` (``os.getloadavg``), since the shared machines run other jobs.
 """
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -24,10 +31,30 @@ __all__ = [
     "bench_env",
     "bench_vector_env",
     "bench_batched_filter",
+    "bench_ppo",
     "bench_vmas",
     "bench_controller",
+    "issue12_summary",
     "run_benchmarks",
+    "FAST_FILTER_PARTICLES",
 ]
+
+#: The reduced particle budget P_T of the filter rows ``n_particles_total`` (a
+#: :class:`~fov_marl.estimation.TrackerParams` field, ``tracker_params=`` of the safety
+#: filter wrappers; the default is 2000). At 500 the default tracker stays calibrated on
+#: every behaviour of ``tests/estimation/test_mixture_calibration.py`` (truth inside the
+#: 95% ellipse in 0.926-0.954 of the steps, 3 seeds x 300 steps; detected ellipses
+#: a <= 0.9 m), tested in ``test_reduced_budget_is_calibrated``; at 250 it is not
+#: (0.894 for ``straight``).
+FAST_FILTER_PARTICLES = 500
+
+
+def _load() -> float:
+    try:
+        return float(os.getloadavg()[0])
+    except OSError:  # pragma: no cover - no load average on this platform
+        return float("nan")
+
 
 DEFAULT_N = (6, 9, 12, 24, 48)
 #: (N, batch sizes) of the vector-env section (issue 12's acceptance figures).
@@ -60,6 +87,7 @@ def bench_env(n_agents: Sequence[int] = (6, 48), steps: int = 300) -> list[dict[
                 "env_steps_per_s": steps / el,
                 "agent_steps_per_s": steps * n / el,
                 "ms_per_env_step": 1e3 * el / steps,
+                "load_1min": _load(),
             }
         )
     return rows
@@ -135,6 +163,7 @@ def bench_vector_env(
                         "env_steps_per_s": rate,
                         "single_env_steps_per_s": single,
                         "ratio": rate / single,
+                        "load_1min": _load(),
                     }
                 )
     return rows
@@ -258,6 +287,7 @@ def bench_batched_filter(
     scenario: str = "coverage",
     policy: str = "filter",
     looped: bool = True,
+    tracker_overrides: dict[str, Any] | None = None,
 ) -> list[dict]:
     """Safety filter (or pfcbf) cost per robot-step, looped over copies vs batched, one run.
 
@@ -280,14 +310,18 @@ def bench_batched_filter(
             :class:`~fov_marl.wrappers.SafetyFilterWrapper` defaults) or ``"pfcbf"``
             (u* from Lloyd / the crossing law, pfcbf's settings).
         looped: False skips the looped variant (large B).
+        tracker_overrides: :class:`~fov_marl.estimation.TrackerParams` fields on top of
+            the policy's settings, e.g. ``{"n_particles_total": 500}``.
 
     Returns:
         One dict per B: ``n_copies``, ``n_agents``, ``robots`` (B N), ``robot_steps``,
         ``looped_ms`` and ``batched_ms`` (wall ms per robot-step), ``looped_cpu_ms`` /
         ``batched_cpu_ms`` (process CPU time), ``speedup`` (looped / batched, wall),
         ``batched_stage_ms`` (tracker, safety_rows, qp, lloyd per robot-step),
-        ``max_action_diff``.
+        ``max_action_diff``, ``n_particles_total``, ``load_1min``.
     """
+    from dataclasses import replace
+
     from fov_marl.control import ControllerParams
     from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
     from fov_marl.estimation import TrackerParams
@@ -305,6 +339,8 @@ def bench_batched_filter(
         cp = ControllerParams(**FILTER_CONTROLLER_DEFAULTS)
     else:
         tp, cp = TrackerParams(), ControllerParams()
+    if tracker_overrides:
+        tp = replace(tp, **tracker_overrides)
     out = []
     for B in n_copies:
         B = int(B)
@@ -403,15 +439,178 @@ def bench_batched_filter(
                 "lloyd": 1e3 * stages["lloyd"] / rs,
             },
             "max_action_diff": max_diff if looped else None,
+            "n_particles_total": int(tp.n_particles_total),
+            "load_1min": _load(),
         }
         out.append(row)
     return out
 
 
-def run_benchmarks(
-    quick: bool = False, n_agents: Sequence[int] | None = None
+def bench_ppo(
+    n_envs: Sequence[int] = (4, 16, 64),
+    safety_filter: Sequence[bool] = (False, True),
+    rollouts: int = 1,
+    per_copy_envs: int | None = 4,
+    filter_particles: Sequence[int | None] = (None, FAST_FILTER_PARTICLES),
+    seed: int = 0,
 ) -> list[dict[str, Any]]:
-    """All sections; ``quick`` uses fewer repetitions."""
+    """PPO samples/s (SB3, the trainer's default hyper-parameters, 1 torch thread).
+
+    For each ``n_envs`` B, the coverage env (N = 6, training horizon 500 steps) through
+    the vector adapter (:class:`~fov_marl.training.vec_env.VectorEnvVecEnv`, what
+    ``fov-marl train`` uses) and, for ``B = per_copy_envs``, through the per-copy adapter
+    (:class:`~fov_marl.training.vec_env.ParallelEnvVecEnv` over B ParallelEnvs, each
+    behind its own :class:`~fov_marl.wrappers.SafetyFilterWrapper` with the filter);
+    ``ratio`` is a row's rate over the per-copy rate of the same filter setting. Behind
+    the filter, each ``filter_particles`` P_T (None: the default 2000). Each row times
+    ``model.learn`` over ``rollouts`` whole rollouts (``n_steps x B x N`` samples each:
+    collection and the gradient epochs, as in training); ``train_share`` is the fraction
+    of that time in PPO's gradient epochs (``PPO.train``), the part no env speed-up
+    reduces.
+
+    Needs the ``train`` extra (torch, stable-baselines3); returns no rows without it.
+    """
+    try:
+        import torch
+        from stable_baselines3 import PPO
+        from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+        from fov_marl.training.trainer import (
+            DEFAULT_TRAIN_MAX_CYCLES,
+            _merged_hyperparams,
+            _to_sb3_kwargs,
+            build_env,
+            make_training_vec_env,
+        )
+        from fov_marl.training.vec_env import ParallelEnvVecEnv
+    except ImportError:
+        return []
+    hp = _merged_hyperparams("ppo", None)
+    kw = _to_sb3_kwargs(hp)
+    env_kw = {"max_cycles": DEFAULT_TRAIN_MAX_CYCLES}
+    prev = torch.get_num_threads()
+    torch.set_num_threads(1)
+
+    def one(adapter: str, b: int, filt: bool, p_t: int | None) -> dict[str, Any]:
+        sf_kw = {"tracker_params": {"n_particles_total": int(p_t)}} if p_t else None
+
+        def factory() -> Any:
+            return build_env("coverage", env_kw, safety_filter=filt, safety_filter_kwargs=sf_kw)
+
+        if adapter == "vector":
+            _, venv = make_training_vec_env(b, factory, gamma=float(hp["gamma"]))
+        else:
+            ad = ParallelEnvVecEnv([factory for _ in range(b)])
+            venv = VecNormalize(
+                VecMonitor(ad), norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=hp["gamma"]
+            )
+        model = PPO("MlpPolicy", venv, seed=seed, device="cpu", **kw)
+        train_s = [0.0]
+        inner = model.train
+
+        def timed_train() -> None:
+            t0 = time.perf_counter()
+            inner()
+            train_s[0] += time.perf_counter() - t0
+
+        model.train = timed_train  # type: ignore[method-assign]
+        t0 = time.perf_counter()
+        model.learn(total_timesteps=int(hp["n_steps"]) * venv.num_envs * int(rollouts))
+        wall = time.perf_counter() - t0
+        venv.close()
+        return {
+            "section": "ppo",
+            "adapter": adapter,
+            "n_envs": int(b),
+            "safety_filter": bool(filt),
+            "n_particles_total": (int(p_t) if p_t else 2000) if filt else None,
+            "samples": int(model.num_timesteps),
+            "samples_per_s": model.num_timesteps / wall,
+            "train_share": train_s[0] / wall,
+            "load_1min": _load(),
+        }
+
+    rows: list[dict[str, Any]] = []
+    try:
+        for filt in safety_filter:
+            for p_t in filter_particles if filt else (None,):
+                base = None
+                if per_copy_envs:
+                    base = one("per_copy", int(per_copy_envs), filt, p_t)
+                    base["ratio"] = 1.0
+                    rows.append(base)
+                for b in n_envs:
+                    r = one("vector", int(b), filt, p_t)
+                    r["ratio"] = r["samples_per_s"] / base["samples_per_s"] if base else None
+                    rows.append(r)
+    finally:
+        torch.set_num_threads(prev)
+    return rows
+
+
+#: The issue's figures for "today" (before the batched core): PPO samples/s at the
+#: default hyper-parameters with and without the filter.
+ISSUE12_PPO_TODAY = {"no_filter": 6087.0, "filter": 1079.0}
+
+
+def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The acceptance figures of the batched core (issue 12), side by side, from ``rows``
+    of one :func:`run_benchmarks` run: one row per goal with ``measured``, ``goal`` and
+    ``met`` (None when the rows needed were not run)."""
+    out: list[dict[str, Any]] = []
+
+    def add(name: str, measured: float | None, goal: str, met: bool | None, **extra: Any):
+        row = {"section": "issue12", "figure": name, "measured": measured, "goal": goal}
+        row.update(met=met, vs_per_copy=None, vs_issue_today=None, load_1min=None)
+        row.update(extra)
+        out.append(row)
+
+    for r in rows:
+        if r["section"] == "vector_env" and r["n_agents"] == 6 and r["num_envs"] == 64:
+            add(
+                f"env-steps/s ratio, N=6 B=64, eta {r['eta_method']}",
+                r["ratio"],
+                ">= 8 x one env",
+                r["ratio"] >= 8.0,
+                load_1min=r.get("load_1min"),
+            )
+    for r in rows:
+        if r["section"] == "vector_filter" and r["policy"] == "filter" and r["robots"] >= 384:
+            add(
+                f"filter ms/robot-step, B*N={r['robots']}, P_T={r.get('n_particles_total')}",
+                r["batched_ms"],
+                "<= 0.1 ms",
+                r["batched_ms"] <= 0.1,
+                load_1min=r.get("load_1min"),
+            )
+    for r in rows:
+        if r["section"] == "ppo" and r["adapter"] == "vector":
+            if r["safety_filter"]:
+                today, goal = ISSUE12_PPO_TODAY["filter"], 3000.0
+                name = f"PPO samples/s, filter P_T={r['n_particles_total']}, B={r['n_envs']}"
+                text = ">= 3000"
+            else:
+                today = ISSUE12_PPO_TODAY["no_filter"]
+                goal = 2.0 * today
+                name = f"PPO samples/s, no filter, B={r['n_envs']}"
+                text = f">= 2 x {today:.0f} (issue's today)"
+            add(
+                name,
+                r["samples_per_s"],
+                text,
+                r["samples_per_s"] >= goal,
+                vs_per_copy=r.get("ratio"),
+                vs_issue_today=r["samples_per_s"] / today,
+                load_1min=r.get("load_1min"),
+            )
+    return out
+
+
+def run_benchmarks(
+    quick: bool = False, n_agents: Sequence[int] | None = None, ppo: bool = False
+) -> list[dict[str, Any]]:
+    """All sections; ``quick`` uses fewer repetitions; ``ppo`` adds :func:`bench_ppo`
+    (about a minute quick, several minutes otherwise) to the ``issue12`` summary."""
     ns = tuple(n_agents) if n_agents else DEFAULT_N
     rows = bench_env(n_agents=sorted({6, 48, *ns}), steps=100 if quick else 500)
     # default run: the issue's figures (N = 6 at B = 1/64/256, N = 24 and 100 at B = 64);
@@ -427,6 +626,22 @@ def run_benchmarks(
             policy=policy,
         ):
             rows.append({"section": "vector_filter", "policy": policy, **r})
+    # the filter at the reduced particle budget, at B N = 384 (the issue's figure)
+    for r in bench_batched_filter(
+        n_copies=(64,),
+        steps=3 if quick else 10,
+        warmup=1 if quick else 2,
+        looped=False,
+        tracker_overrides={"n_particles_total": FAST_FILTER_PARTICLES},
+    ):
+        rows.append({"section": "vector_filter", "policy": "filter", **r})
+    if ppo:
+        rows.extend(
+            bench_ppo(
+                n_envs=(4, 16) if quick else (4, 16, 64),
+                filter_particles=(None, FAST_FILTER_PARTICLES),
+            )
+        )
     try:
         from fov_marl.estimation.benchmark import bench_tracker
 
@@ -454,6 +669,7 @@ def run_benchmarks(
         )
     except ValueError:  # pfcbf not registered
         pass
+    rows.extend(issue12_summary(rows))
     return rows
 
 

@@ -354,7 +354,7 @@ BENCH_MAX_AGENTS = 100
 def run_bench(args: argparse.Namespace) -> list[dict[str, Any]]:
     from fov_marl.bench import run_benchmarks
 
-    rows = run_benchmarks(quick=args.quick, n_agents=args.n_agents)
+    rows = run_benchmarks(quick=args.quick, n_agents=args.n_agents, ppo=args.ppo)
     if args.json:
         print(json.dumps(rows, indent=2))
     else:
@@ -599,6 +599,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     b.add_argument("--json", action="store_true", help="print JSON instead of tables")
     b.add_argument("--quick", action="store_true", help="fewer repetitions")
+    b.add_argument(
+        "--ppo",
+        action="store_true",
+        help="also PPO samples/s (vector vs per-copy adapter, with and without the safety "
+        "filter; needs the train extra; minutes)",
+    )
     b.add_argument(
         "--n-agents",
         type=_int_in("--n-agents", 2, BENCH_MAX_AGENTS),

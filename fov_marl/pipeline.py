@@ -444,9 +444,10 @@ class PfCbfPipeline:
         e = self._est
         counts = e["counts"].astype(np.float64)
         w = np.where(e["detected"], 0.0, 1.0 / np.maximum(counts, 1.0))  # (R, M)
-        pts, owner = self.bank.particles_all()
-        local = owner - (owner > self._agent_of_row[:, None])  # neighbour ID -> column
-        return pts, np.take_along_axis(w, local, axis=1)
+        pts, _ = self.bank.particles_all()
+        # a row's particles are sorted by owner, in neighbour-column order: each column's
+        # mass repeated by its count (the values of a gather by owner column, faster)
+        return pts, np.repeat(w.reshape(-1), e["counts"].reshape(-1)).reshape(pts.shape[:2])
 
     def safety_rows(self) -> SafetyRows:
         """Every robot's collision rows (:mod:`fov_marl.control.safety`) from its own data."""

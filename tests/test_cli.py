@@ -135,7 +135,15 @@ def test_bench_json_reports_every_layer(capsys):
     assert main(["bench", "--quick", "--n-agents", "6", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)
     sections = {r["section"] for r in rows}
-    assert {"env", "vector_env", "vector_filter", "tracker", "control", "controller"} <= sections
+    assert {
+        "env",
+        "vector_env",
+        "vector_filter",
+        "tracker",
+        "control",
+        "controller",
+        "issue12",
+    } <= sections
     assert sections <= {
         "env",
         "vector_env",
@@ -144,7 +152,14 @@ def test_bench_json_reports_every_layer(capsys):
         "tracker",
         "control",
         "controller",
+        "issue12",
     }
+    # the acceptance summary: the env ratio at N = 6, B = 64 and the filter at B N = 384,
+    # at the default and at the reduced particle budget; every row carries the load
+    summary = [r for r in rows if r["section"] == "issue12"]
+    figures = " | ".join(r["figure"] for r in summary)
+    assert "N=6 B=64, eta exact" in figures and "P_T=2000" in figures and "P_T=500" in figures
+    assert all(r["load_1min"] is not None for r in summary)
     ctrl = [r for r in rows if r["section"] == "controller"]
     assert ctrl[0]["n_agents"] == 6 and ctrl[0]["ms_per_robot_step"] > 0
     assert {"tracker_ms", "lloyd_ms", "qp_ms"} <= set(ctrl[0])

@@ -401,6 +401,7 @@ SPECS: dict[str, dict[str, dict]] = {
     "bench": {
         "--json": {"bad": ["--json=1"], "good": [None]},
         "--quick": {"bad": ["--quick=0"], "good": [None]},
+        "--ppo": {"bad": ["--ppo=1"], "good": [None]},
         "--n-agents": {
             "bad": [["1"], ["0"], ["-2"], ["101"], ["abc"], [""], ["2", "x"], ["2.5"], []],
             "good": [["2"], ["2", "3"], ["100"]],
@@ -697,8 +698,8 @@ def _stubs(names: tuple[str, ...], calls: list):
         fov_marl.report.reproduce = fake_reproduce
     if "bench" in names:
 
-        def fake_bench(quick=False, n_agents=None):
-            calls.append(("bench", quick, n_agents))
+        def fake_bench(quick=False, n_agents=None, ppo=False):
+            calls.append(("bench", quick, n_agents) + (("ppo",) if ppo else ()))
             return [{"section": "env", "n_agents": n, "x": 1.0} for n in (n_agents or [6])]
 
         saved.append((fov_marl.bench, "run_benchmarks", fov_marl.bench.run_benchmarks))

@@ -508,6 +508,49 @@ def test_eta_batch_is_bit_identical_to_eta_per_copy(n):
         assert abs(got[b] - coverage_efficiency_reference(P[b], CFG)) < 1e-14
 
 
+@pytest.mark.parametrize(
+    "cfg_kw",
+    [
+        {},
+        {"sensing_radius_m": 9.0},
+        {"arena_size_m": 37.3, "eta_grid_m": 0.13, "sensing_radius_m": 4.37},
+        {"density_mean_m": (5.0, 30.0)},
+    ],
+)
+def test_packed_eta_kernel_is_bit_identical_to_the_sorted_kernel(cfg_kw):
+    # the packed-key kernel (the default) against the former argsort kernel: same bits
+    cfg = make_config(**cfg_kw)
+    metric = CoverageMetric(cfg)
+    L, h = cfg.arena_size_m, metric.cell_m
+    rng = np.random.default_rng(len(cfg_kw))
+    for B, N in [(1, 1), (1, 6), (7, 6), (64, 6), (3, 24), (2, 100), (300, 3)]:
+        teams = [
+            rng.uniform(-8.0, L + 8.0, (B, N, 2)),
+            # disk centres on cell centres and cell edges: ends on cell centres
+            (
+                np.round(rng.uniform(-2.0, L + 2.0, (B, N, 2)) / h)
+                + rng.choice([0.0, 0.5], (B, N, 2))
+            )
+            * h,
+            # coincident disks: equal run starts in a row (ties kept in disk order)
+            np.repeat(rng.uniform(0.0, L, (B, 1, 2)), N, axis=1) + (np.arange(N) % 2)[:, None],
+        ]
+        for P in teams:
+            assert metric._packing(B, N) is not None
+            for exact_sum in (True, False):
+                # the kernel itself (no size switch, no chunking) and the dispatcher
+                got = metric._eta_batch_packed(P.copy(), exact_sum, metric._packing(B, N))
+                via = metric._eta_batch(P.copy(), exact_sum)
+                want = metric._eta_batch_sorted(P.copy(), exact_sum)
+                if exact_sum:
+                    np.testing.assert_array_equal(got, want)
+                    np.testing.assert_array_equal(via, want)
+                else:
+                    assert max(np.abs(got - want).max(), np.abs(via - want).max()) <= 1e-14
+    # a layout over 63 bits falls back to the sorted kernel
+    assert metric._packing(2**40, 6) is None
+
+
 def test_eta_batch_segmented_sum_differs_by_round_off_only():
     rng = np.random.default_rng(0)
     P = rng.uniform(-3.0, 43.0, (500, 6, 2))

@@ -463,11 +463,13 @@ class _BankCore:
         h = self._h.reshape(-1)
         gid, starts, blen = self._gid, self._starts, self._block_len
         det_f = det.reshape(-1)
-        det_p = det_f[gid]
+        # per-particle copies of per-block values by np.repeat over the contiguous
+        # blocks: the numbers of a gather by gid, several times faster
+        det_p = np.repeat(det_f, blen)
         if det_f.any():
-            dx = x - zx.reshape(-1)[gid]
-            dy = y - zy.reshape(-1)[gid]
-            dh = K.wrap(h - zh.reshape(-1)[gid])
+            dx = x - np.repeat(zx.reshape(-1), blen)
+            dy = y - np.repeat(zy.reshape(-1), blen)
+            dh = K.wrap(h - np.repeat(zh.reshape(-1), blen))
             lw_det, maha = K.measurement_log_likelihood(dx, dy, dh, self._inv_var)
             lw = np.where(det_p, lw_det, 0.0)
             maha_min = np.minimum.reduceat(maha, starts)
@@ -478,7 +480,8 @@ class _BankCore:
         lw_max = np.maximum.reduceat(lw, starts)
         dead = lw_max == -np.inf
         shift = np.where(dead, 0.0, lw_max)
-        w = np.exp(lw - shift[gid])
+        lw -= np.repeat(shift, blen)
+        w = np.exp(lw, out=lw)
         sw = np.add.reduceat(w, starts)
         sw2 = np.add.reduceat(w * w, starts)
         ess = np.divide(sw * sw, sw2, out=np.zeros_like(sw), where=~dead)
@@ -489,7 +492,7 @@ class _BankCore:
             for b in np.flatnonzero(rec):
                 self._recover(b, bool(det_f[b]), x, y, h, w, zx, zy, zh, pose)
             ess = np.where(rec, blen.astype(np.float64), ess)
-        sw, mean, cov = K.weighted_moments(x, y, w, gid, starts)
+        sw, mean, cov = K.weighted_moments(x, y, w, gid, starts, blen)
         if self._mix:
             mode = self._mode.reshape(-1)
             vx = self._vx.reshape(-1)
@@ -515,13 +518,13 @@ class _BankCore:
         idx = K.systematic_resample_indices(
             w, P, gid, starts, blen, counts.reshape(-1), self._u.reshape(-1)
         )
-        self._x = x[idx].reshape(R, P)
-        self._y = y[idx].reshape(R, P)
-        self._h = h[idx].reshape(R, P)
+        self._x = np.take(x, idx).reshape(R, P)
+        self._y = np.take(y, idx).reshape(R, P)
+        self._h = np.take(h, idx).reshape(R, P)
         if self._mix:
-            self._mode = mode[idx].reshape(R, P)
-            self._vx = vx[idx].reshape(R, P)
-            self._vy = vy[idx].reshape(R, P)
+            self._mode = np.take(mode, idx).reshape(R, P)
+            self._vx = np.take(vx, idx).reshape(R, P)
+            self._vy = np.take(vy, idx).reshape(R, P)
             self._mode_probs = probs.reshape(R, M, 4)
             self._v_cv = v_cv.reshape(R, M, 2)
         self._counts = counts
@@ -687,8 +690,11 @@ class _BankCore:
     def particles_all(self) -> tuple[np.ndarray, np.ndarray]:
         """``(p_body (R, P, 2), owner (R, P) neighbour ID)`` of every row (new arrays)."""
         p = np.stack([self._x, self._y], -1)
-        local = self._gid.reshape(self._R, self._P) - (np.arange(self._R) * self._M)[:, None]
-        return p, np.take_along_axis(self._ids, local, axis=1) if self._M else local
+        if not self._M:
+            return p, np.zeros((self._R, self._P), dtype=np.int64)
+        # blocks are contiguous and in neighbour order: each ID repeated by its count
+        owner = np.repeat(self._ids.reshape(-1), self._counts.reshape(-1))
+        return p, owner.reshape(self._R, self._P)
 
     #: per-row state (leading row axis) replaced by :meth:`splice`
     _ROW_STATE = (
@@ -1362,8 +1368,17 @@ class VectorTrackerBank:
         """``(p_body (B N, P_T, 2) m, owner (B N, P_T) neighbour ID)`` of every row, sorted
         by owner within a row (new arrays)."""
         self._check()
-        parts = [c.particles_all() for c in self._cores]
-        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+        R, P = self._R, self._P
+        pts = np.empty((R, P, 2))
+        for core, (s, e) in zip(self._cores, self._bounds, strict=True):
+            pts[s:e, :, 0] = core._x
+            pts[s:e, :, 1] = core._y
+        if not self._M:
+            return pts, np.zeros((R, P), dtype=np.int64)
+        # blocks are contiguous and in neighbour order: each ID repeated by its count
+        ids = np.concatenate([c._ids for c in self._cores])
+        counts = np.concatenate([c._counts for c in self._cores])
+        return pts, np.repeat(ids.reshape(-1), counts.reshape(-1)).reshape(R, P)
 
     def particles_body(self, row: int) -> tuple[np.ndarray, np.ndarray]:
         """``(p_body (P_T, 2), owner (P_T,))`` of row ``row`` (see :meth:`TrackerBank.particles_body`)."""

@@ -268,3 +268,17 @@ def test_hierarchy_matches_osqp_backend_on_recorded_problems(recorded_problems):
         compared += 1
         np.testing.assert_allclose(res.u[r], s.u, atol=1e-3, err_msg=f"problem {r}")
     assert compared >= 0.9 * A.shape[0]  # measured: 78 of 78, max |du| 2.3e-4
+
+
+def test_same_rows_equals_its_reference():
+    from fov_marl.control.batch_qp import _DUP_TOL, _same_rows, _same_rows_reference
+
+    rng = np.random.default_rng(3)
+    for R, K in [(1, 1), (5, 7), (40, 23), (0, 4)]:
+        A = rng.normal(size=(R, K, 3))
+        b = rng.normal(size=(R, K))
+        if R and K > 4:  # exact, near (inside and outside the tolerance) duplicates
+            A[:, 2], b[:, 2] = A[:, 1], b[:, 1]
+            A[:, 3], b[:, 3] = A[:, 1] + 0.5 * _DUP_TOL, b[:, 1] - 0.9 * _DUP_TOL
+            A[:, 4], b[:, 4] = A[:, 1], b[:, 1] + 2.0 * _DUP_TOL
+        np.testing.assert_array_equal(_same_rows(A, b), _same_rows_reference(A, b))
