@@ -354,9 +354,7 @@ def episode_job(job: dict[str, Any], on_step: Callable[[Any, dict], None] | None
     job = dict(job)
     policy = job.pop("policy")
     if is_exported_policy(policy):  # numpy forward pass, any N, no torch
-        rec = run_episode(
-            policy="learned", policy_kwargs={"path": policy}, on_step=on_step, **job
-        )
+        rec = run_episode(policy="learned", policy_kwargs={"path": policy}, on_step=on_step, **job)
         rec.policy = str(policy)
     elif is_model_path(policy):
         from fov_marl.training import load_policy  # torch only for learned policies

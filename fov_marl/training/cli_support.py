@@ -249,6 +249,13 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         "change, in [0, 1000]",
     )
     parser.add_argument(
+        "--blind-motion-coef",
+        type=_real_in("--blind-motion-coef", 0.0, 1e3),
+        default=0.0,
+        help="penalty on planar speed towards directions outside the camera sector, in "
+        "[0, 1000] (teaches 'look where you drive', which the safety filter rewards)",
+    )
+    parser.add_argument(
         "--init-from",
         metavar="MODEL.zip",
         default=None,
@@ -380,6 +387,7 @@ def run_train(args: argparse.Namespace) -> Path | int:
             eta_level_coef=args.eta_level_coef,
             intervention_coef=args.intervention_coef,
             init_from=args.init_from,
+            blind_motion_coef=args.blind_motion_coef,
         )
     except ConfigError as exc:
         flag = source_of_error(str(exc), sources) or _flag_of(str(exc), args)

@@ -338,6 +338,13 @@ class CtdeVecEnvWrapper(VecEnvWrapper):
                                        nominal velocity, normalised (v / v_max, ω /
                                        ω_max), so the policy learns actions the filter
                                        leaves alone
+    ``− blind_motion_coef · b(a)``     ``b = ‖v‖ · max(0, |∠v| − β / 2) / π``: planar
+                                       speed (normalised) towards directions outside
+                                       the camera's sector. No filter needed: it
+                                       teaches "look where you drive" before training
+                                       behind the filter, whose blind-travel rows slow
+                                       (and count as interventions) motion into space
+                                       the robot has not looked at
     ================================  ==============================================
 
     Args:
@@ -345,7 +352,9 @@ class CtdeVecEnvWrapper(VecEnvWrapper):
         n_agents: N.
         ctde: append :func:`agent_centric_state` to every observation (and to
             ``terminal_observation``).
-        eta_level_coef, intervention_coef: the shaping weights (0 disables a term).
+        eta_level_coef, intervention_coef, blind_motion_coef: the shaping weights (0
+            disables a term).
+        fov_deg: β of the scenario (for ``blind_motion_coef``).
     """
 
     def __init__(
@@ -356,8 +365,13 @@ class CtdeVecEnvWrapper(VecEnvWrapper):
         ctde: bool = False,
         eta_level_coef: float = 0.0,
         intervention_coef: float = 0.0,
+        blind_motion_coef: float = 0.0,
+        fov_deg: float = 120.0,
     ) -> None:
         self.n_agents = int(n_agents)
+        self.blind_motion_coef = float(blind_motion_coef)
+        self.fov_half_rad = np.deg2rad(float(fov_deg)) / 2.0
+        self._actions: np.ndarray | None = None
         self.ctde = bool(ctde)
         self.eta_level_coef = float(eta_level_coef)
         self.intervention_coef = float(intervention_coef)
@@ -383,6 +397,10 @@ class CtdeVecEnvWrapper(VecEnvWrapper):
     def reset(self) -> np.ndarray:
         return self._augment(self.venv.reset())
 
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions)
+        self.venv.step_async(actions)
+
     def step_wait(self) -> Any:
         obs, rew, dones, infos = self.venv.step_wait()
         rew = np.asarray(rew, dtype=np.float32).copy()
@@ -393,6 +411,10 @@ class CtdeVecEnvWrapper(VecEnvWrapper):
             nom = np.stack([np.asarray(i["safety/nominal_action"], np.float64) for i in infos])
             app = np.stack([np.asarray(i["safety/applied_action"], np.float64) for i in infos])
             rew -= (self.intervention_coef * action_change(nom, app)).astype(np.float32)
+        if self.blind_motion_coef and self._actions is not None:
+            rew -= (self.blind_motion_coef * blind_motion(self._actions, self.fov_half_rad)).astype(
+                np.float32
+            )
         if self.ctde and np.any(dones):
             N = self.n_agents
             idx = np.flatnonzero(dones)
@@ -422,3 +444,12 @@ def action_change(nominal: np.ndarray, applied: np.ndarray) -> np.ndarray:
     v = v * np.minimum(1.0, 1.0 / np.maximum(n, 1e-12))
     u = np.concatenate([v, a[..., 2:3]], axis=-1)
     return np.linalg.norm(np.asarray(applied, dtype=np.float64) - u, axis=-1)
+
+
+def blind_motion(actions: np.ndarray, fov_half_rad: float) -> np.ndarray:
+    """``(R,)`` ``‖v‖ · max(0, |∠v| − β / 2) / π`` of actions ``(R, 3)`` (normalised planar
+    speed, clipped as the env does, times its angle outside the camera sector)."""
+    a = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
+    speed = np.minimum(np.linalg.norm(a[..., :2], axis=-1), 1.0)
+    out = np.maximum(np.abs(np.arctan2(a[..., 1], a[..., 0])) - fov_half_rad, 0.0) / np.pi
+    return speed * out

@@ -725,6 +725,7 @@ def train(
     eta_level_coef: float = 0.0,
     intervention_coef: float = 0.0,
     init_from: str | os.PathLike | None = None,
+    blind_motion_coef: float = 0.0,
 ) -> Path:
     """Train one shared policy for all robots and save it; return ``out_dir/model.zip``.
 
@@ -772,6 +773,8 @@ def train(
             (:class:`~fov_marl.training.set_policy.CtdeVecEnvWrapper`; 0: the env's reward).
         intervention_coef: weight of the penalty on the filter's action change, in
             [0, 1000] (behind the safety filter).
+        blind_motion_coef: weight of the penalty on driving outside the camera's sector,
+            in [0, 1000] (no filter needed).
         init_from: a ``model.zip`` of the same architecture and spaces whose parameters
             start this run (fine-tuning, e.g. behind the filter after pre-training
             without it).
@@ -805,6 +808,7 @@ def train(
         raise ConfigError("ctde needs arch 'set' (the MLP actor would read the critic's state)")
     eta_level_coef = check_real("eta_level_coef", eta_level_coef, 0.0, 1e3)
     intervention_coef = check_real("intervention_coef", intervention_coef, 0.0, 1e3)
+    blind_motion_coef = check_real("blind_motion_coef", blind_motion_coef, 0.0, 1e3)
     if init_from is not None:
         init_path = Path(init_from)
         if init_path.is_dir():
@@ -866,7 +870,7 @@ def train(
         pk.pop("activation_fn", None)
         pk.update(ctde=ctde, feature_scales=feature_scales)
         sb3_kwargs["policy_kwargs"] = pk
-    if ctde or eta_level_coef or intervention_coef:
+    if ctde or eta_level_coef or intervention_coef or blind_motion_coef:
         from fov_marl.training.set_policy import CtdeVecEnvWrapper
 
         def wrap_adapter(adapter: Any) -> Any:
@@ -876,6 +880,8 @@ def train(
                 ctde=ctde,
                 eta_level_coef=eta_level_coef,
                 intervention_coef=intervention_coef,
+                blind_motion_coef=blind_motion_coef,
+                fov_deg=train_config.fov_deg,
             )
 
     out.mkdir(parents=True, exist_ok=True)
@@ -967,6 +973,7 @@ def train(
         "ctde": bool(ctde),
         "eta_level_coef": float(eta_level_coef),
         "intervention_coef": float(intervention_coef),
+        "blind_motion_coef": float(blind_motion_coef),
         "init_from": None if init_from is None else str(init_from),
         "feature_scales": feature_scales,
         "hyperparams": _jsonable(hp),
