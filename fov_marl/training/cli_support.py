@@ -256,6 +256,19 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         "[0, 1000] (teaches 'look where you drive', which the safety filter rewards)",
     )
     parser.add_argument(
+        "--action-cost-coef",
+        type=_real_in("--action-cost-coef", 0.0, 1e3),
+        default=0.0,
+        help="penalty on the action energy (|v|^2 + w^2) / 2 (normalised), in [0, 1000]",
+    )
+    parser.add_argument(
+        "--fov-keep-coef",
+        type=_real_in("--fov-keep-coef", 0.0, 1e3),
+        default=0.0,
+        help="penalty on neighbours closer than 3 D_s outside the camera sector (exact "
+        "positions), in [0, 1000]: what the safety filter's FoV rows would correct",
+    )
+    parser.add_argument(
         "--init-from",
         metavar="MODEL.zip",
         default=None,
@@ -388,6 +401,8 @@ def run_train(args: argparse.Namespace) -> Path | int:
             intervention_coef=args.intervention_coef,
             init_from=args.init_from,
             blind_motion_coef=args.blind_motion_coef,
+            action_cost_coef=args.action_cost_coef,
+            fov_keep_coef=args.fov_keep_coef,
         )
     except ConfigError as exc:
         flag = source_of_error(str(exc), sources) or _flag_of(str(exc), args)

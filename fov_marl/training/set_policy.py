@@ -345,6 +345,15 @@ class CtdeVecEnvWrapper(VecEnvWrapper):
                                        behind the filter, whose blind-travel rows slow
                                        (and count as interventions) motion into space
                                        the robot has not looked at
+    ``− action_cost_coef · e(a)``      ``e = (‖v‖² + ω²) / 2`` (normalised, in [0, 1]):
+                                       holding a formation by standing still rather
+                                       than by circling at full speed (which the
+                                       filter's rows keep correcting)
+    ``− fov_keep_coef · k``            ``k = Σ_j [d_ij < 3 D_s] max(0, |∠ⁱp_j| − β/2)
+                                       / π`` (exact positions, as the critic's): close
+                                       neighbours outside the camera sector, which the
+                                       filter's FoV rows (slack ``σ(d − 3 D_s)``, Eq.
+                                       16) would turn the camera to
     ================================  ==============================================
 
     Args:
@@ -354,7 +363,9 @@ class CtdeVecEnvWrapper(VecEnvWrapper):
             ``terminal_observation``).
         eta_level_coef, intervention_coef, blind_motion_coef: the shaping weights (0
             disables a term).
-        fov_deg: β of the scenario (for ``blind_motion_coef``).
+        action_cost_coef, fov_keep_coef: see the table.
+        fov_deg: β of the scenario (``blind_motion_coef``, ``fov_keep_coef``).
+        keep_distance_m: 3 D_s of the scenario (``fov_keep_coef``).
     """
 
     def __init__(
@@ -367,8 +378,14 @@ class CtdeVecEnvWrapper(VecEnvWrapper):
         intervention_coef: float = 0.0,
         blind_motion_coef: float = 0.0,
         fov_deg: float = 120.0,
+        action_cost_coef: float = 0.0,
+        fov_keep_coef: float = 0.0,
+        keep_distance_m: float = 6.0,
     ) -> None:
         self.n_agents = int(n_agents)
+        self.action_cost_coef = float(action_cost_coef)
+        self.fov_keep_coef = float(fov_keep_coef)
+        self.keep_distance_m = float(keep_distance_m)
         self.blind_motion_coef = float(blind_motion_coef)
         self.fov_half_rad = np.deg2rad(float(fov_deg)) / 2.0
         self._actions: np.ndarray | None = None
@@ -415,6 +432,15 @@ class CtdeVecEnvWrapper(VecEnvWrapper):
             rew -= (self.blind_motion_coef * blind_motion(self._actions, self.fov_half_rad)).astype(
                 np.float32
             )
+        if self.action_cost_coef and self._actions is not None:
+            rew -= (self.action_cost_coef * action_energy(self._actions)).astype(np.float32)
+        if self.fov_keep_coef and self.n_agents > 1:
+            N = self.n_agents
+            st = agent_centric_state(np.asarray(obs).reshape(-1, N, obs.shape[-1]))
+            cost = fov_keep_cost(
+                st.reshape(-1, N - 1, STATE_ENTRY), self.fov_half_rad, self.keep_distance_m
+            )
+            rew -= (self.fov_keep_coef * cost).astype(np.float32)
         if self.ctde and np.any(dones):
             N = self.n_agents
             idx = np.flatnonzero(dones)
@@ -453,3 +479,19 @@ def blind_motion(actions: np.ndarray, fov_half_rad: float) -> np.ndarray:
     speed = np.minimum(np.linalg.norm(a[..., :2], axis=-1), 1.0)
     out = np.maximum(np.abs(np.arctan2(a[..., 1], a[..., 0])) - fov_half_rad, 0.0) / np.pi
     return speed * out
+
+
+def action_energy(actions: np.ndarray) -> np.ndarray:
+    """``(R,)`` ``(‖v‖² + ω²) / 2`` of actions ``(R, 3)`` (planar speed clipped to 1)."""
+    a = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
+    speed = np.minimum(np.linalg.norm(a[..., :2], axis=-1), 1.0)
+    return 0.5 * (speed**2 + a[..., 2] ** 2)
+
+
+def fov_keep_cost(entries: np.ndarray, fov_half_rad: float, keep_distance_m: float) -> np.ndarray:
+    """``(R,)`` ``Σ_j [d_ij < keep] max(0, |∠ⁱp_j| − β/2) / π`` from critic entries
+    ``(R, N − 1, 5)`` (:func:`agent_centric_state`)."""
+    e = np.asarray(entries, dtype=np.float64)
+    d = np.hypot(e[..., 1], e[..., 2])
+    out = np.maximum(np.abs(np.arctan2(e[..., 2], e[..., 1])) - fov_half_rad, 0.0) / np.pi
+    return np.sum((e[..., 0] > 0.5) * (d < keep_distance_m) * out, axis=-1)

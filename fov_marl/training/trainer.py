@@ -726,6 +726,8 @@ def train(
     intervention_coef: float = 0.0,
     init_from: str | os.PathLike | None = None,
     blind_motion_coef: float = 0.0,
+    action_cost_coef: float = 0.0,
+    fov_keep_coef: float = 0.0,
 ) -> Path:
     """Train one shared policy for all robots and save it; return ``out_dir/model.zip``.
 
@@ -775,6 +777,9 @@ def train(
             [0, 1000] (behind the safety filter).
         blind_motion_coef: weight of the penalty on driving outside the camera's sector,
             in [0, 1000] (no filter needed).
+        action_cost_coef: weight of the action energy cost, in [0, 1000].
+        fov_keep_coef: weight of the penalty on neighbours closer than 3 D_s outside the
+            camera sector, in [0, 1000] (exact positions; no filter needed).
         init_from: a ``model.zip`` of the same architecture and spaces whose parameters
             start this run (fine-tuning, e.g. behind the filter after pre-training
             without it).
@@ -809,6 +814,8 @@ def train(
     eta_level_coef = check_real("eta_level_coef", eta_level_coef, 0.0, 1e3)
     intervention_coef = check_real("intervention_coef", intervention_coef, 0.0, 1e3)
     blind_motion_coef = check_real("blind_motion_coef", blind_motion_coef, 0.0, 1e3)
+    action_cost_coef = check_real("action_cost_coef", action_cost_coef, 0.0, 1e3)
+    fov_keep_coef = check_real("fov_keep_coef", fov_keep_coef, 0.0, 1e3)
     if init_from is not None:
         init_path = Path(init_from)
         if init_path.is_dir():
@@ -870,7 +877,14 @@ def train(
         pk.pop("activation_fn", None)
         pk.update(ctde=ctde, feature_scales=feature_scales)
         sb3_kwargs["policy_kwargs"] = pk
-    if ctde or eta_level_coef or intervention_coef or blind_motion_coef:
+    shaping = (
+        eta_level_coef,
+        intervention_coef,
+        blind_motion_coef,
+        action_cost_coef,
+        fov_keep_coef,
+    )
+    if ctde or any(shaping):
         from fov_marl.training.set_policy import CtdeVecEnvWrapper
 
         def wrap_adapter(adapter: Any) -> Any:
@@ -882,6 +896,9 @@ def train(
                 intervention_coef=intervention_coef,
                 blind_motion_coef=blind_motion_coef,
                 fov_deg=train_config.fov_deg,
+                action_cost_coef=action_cost_coef,
+                fov_keep_coef=fov_keep_coef,
+                keep_distance_m=3.0 * train_config.safety_distance_m,
             )
 
     out.mkdir(parents=True, exist_ok=True)
@@ -974,6 +991,8 @@ def train(
         "eta_level_coef": float(eta_level_coef),
         "intervention_coef": float(intervention_coef),
         "blind_motion_coef": float(blind_motion_coef),
+        "action_cost_coef": float(action_cost_coef),
+        "fov_keep_coef": float(fov_keep_coef),
         "init_from": None if init_from is None else str(init_from),
         "feature_scales": feature_scales,
         "hyperparams": _jsonable(hp),

@@ -46,8 +46,12 @@ def test_n6_final_eta_above_pfcbf_paired(n6):
 
 def test_n6_time_to_normalised_threshold_not_longer_than_pfcbf(n6):
     learned, pfcbf = n6
-    t_l = np.array([np.inf if r.time_to_eta_norm_s is None else r.time_to_eta_norm_s for r in learned])
-    t_p = np.array([np.inf if r.time_to_eta_norm_s is None else r.time_to_eta_norm_s for r in pfcbf])
+    t_l = np.array(
+        [np.inf if r.time_to_eta_norm_s is None else r.time_to_eta_norm_s for r in learned]
+    )
+    t_p = np.array(
+        [np.inf if r.time_to_eta_norm_s is None else r.time_to_eta_norm_s for r in pfcbf]
+    )
     print(f"time to 0.95 eta_opt: learned {t_l.mean():.2f} s, pfcbf {t_p.mean():.2f} s")
     assert np.all(np.isfinite(t_l))
     assert t_l.mean() <= t_p.mean()

@@ -241,3 +241,15 @@ def test_bad_set_options_are_errors_naming_them(tmp_path):
         train(arch="set", eta_level_coef=-1.0, out_dir=tmp_path / "c", timesteps=10)
     with pytest.raises(ValueError, match="init_from"):
         train(arch="set", init_from=tmp_path / "none.zip", out_dir=tmp_path / "d", timesteps=10)
+
+
+def test_shaping_terms_on_known_cases():
+    from fov_marl.training.set_policy import action_energy, blind_motion, fov_keep_cost
+
+    half = np.deg2rad(60.0)
+    act = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(blind_motion(act, half), [0.0, 1 / 6, 2 / 3, 0.0], atol=1e-12)
+    np.testing.assert_allclose(action_energy(act), [0.5, 0.5, 1.0, 0.0], atol=1e-12)
+    # ahead (in view), behind and close, behind but far, absent: only the second costs
+    e = np.array([[[1, 3, 0, 1, 0], [1, -3, 0, 1, 0], [1, -30, 0, 1, 0], [0, -3, 0, 0, 0]]], float)
+    np.testing.assert_allclose(fov_keep_cost(e, half, 6.0), [2 / 3], atol=1e-12)
