@@ -42,9 +42,9 @@ Network (sizes in ``config.json`` ``arch``; activation tanh)
 ------------------------------------------------------------
 ``e_k = φ(neighbour_k)`` (2 layers of ``hidden``), ``mean = Σ m_k e_k / max(Σ m_k, 1)``,
 ``max = max_{m_k = 1} e_k`` (0 when nothing is detected), ``c = ψ(cue)`` (1 layer),
-``z = head([mean, max, c, Σ m_k / count_scale])`` (2 layers), action mean ``= A z + b``.
-The deterministic action is that mean clipped to ``[-1, 1]`` (the Gaussian's
-log-std is stored but unused).
+``z = head([mean, max, c, Σ m_k / count_scale])`` (2 layers), action mean ``= tanh(A z +
+b)`` (``arch.bounded_mean``; ``A z + b`` without it). The deterministic action is that
+mean clipped to ``[-1, 1]`` (the Gaussian's log-std is stored but unused).
 
 Files of a model folder
 -----------------------
@@ -175,6 +175,7 @@ class SetActorWeights:
         self.config = _check_format(config, "config")
         arch = config["arch"]
         self.activation: str = str(arch.get("activation", "tanh"))
+        self.bounded_mean = bool(arch.get("bounded_mean", False))
         _act(self.activation, np.zeros(1))
         scales = config["feature_scales"]
         self.neighbour_m = float(scales["neighbour_m"])
@@ -269,7 +270,8 @@ class SetActorWeights:
     def mean_action(self, obs: np.ndarray) -> np.ndarray:
         """``(R, 3)`` mean of the policy's Gaussian for observations ``(R, obs_dim)``."""
         W, b = self.action
-        return self.latent(obs) @ W.T + b
+        mean = self.latent(obs) @ W.T + b
+        return np.tanh(mean) if self.bounded_mean else mean
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """``(R, 3)`` float32 deterministic actions: the mean clipped to ``[-1, 1]``."""

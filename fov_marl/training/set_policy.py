@@ -223,7 +223,10 @@ class SetActorCriticPolicy(ActorCriticPolicy):
 
     Extra keyword arguments (``policy_kwargs``): ``hidden`` (64), ``set_activation``
     (``"tanh"``), ``ctde`` (False), ``feature_scales`` (required: the training
-    scenario's :func:`default_feature_scales`).
+    scenario's :func:`default_feature_scales`), ``bounded_mean`` (True: the Gaussian's
+    mean is ``tanh(A z + b)``, inside the action box, so penalties on the applied action
+    keep a gradient; an unbounded mean drifts far outside ``[-1, 1]``, where every
+    sample is clipped to the same action).
     """
 
     def __init__(
@@ -236,6 +239,7 @@ class SetActorCriticPolicy(ActorCriticPolicy):
         set_activation: str = "tanh",
         ctde: bool = False,
         feature_scales: dict[str, Any] | None = None,
+        bounded_mean: bool = True,
         **kwargs: Any,
     ) -> None:
         if feature_scales is None:
@@ -248,8 +252,14 @@ class SetActorCriticPolicy(ActorCriticPolicy):
         self.set_activation = set_activation
         self.ctde = bool(ctde)
         self.feature_scales = dict(feature_scales)
+        self.bounded_mean = bool(bounded_mean)
         kwargs.pop("net_arch", None)
         super().__init__(observation_space, action_space, lr_schedule, *args, **kwargs)
+
+    def _build(self, lr_schedule: Any) -> None:
+        super()._build(lr_schedule)
+        if self.bounded_mean:  # same parameters (the optimizer already holds them)
+            self.action_net = nn.Sequential(self.action_net, nn.Tanh())
 
     def _build_mlp_extractor(self) -> None:
         self.mlp_extractor = SetActorCritic(
@@ -263,6 +273,7 @@ class SetActorCriticPolicy(ActorCriticPolicy):
             set_activation=self.set_activation,
             ctde=self.ctde,
             feature_scales=self.feature_scales,
+            bounded_mean=self.bounded_mean,
         )
         return data
 
@@ -279,12 +290,17 @@ def actor_weights(policy: SetActorCriticPolicy) -> tuple[dict[str, np.ndarray], 
         for k, lin in enumerate(linears):
             weights[f"{prefix}.{k}.weight"] = lin.weight.detach().cpu().numpy().astype(np.float32)
             weights[f"{prefix}.{k}.bias"] = lin.bias.detach().cpu().numpy().astype(np.float32)
-    weights["action.weight"] = policy.action_net.weight.detach().cpu().numpy().astype(np.float32)
-    weights["action.bias"] = policy.action_net.bias.detach().cpu().numpy().astype(np.float32)
+    lin = policy.action_net[0] if policy.bounded_mean else policy.action_net
+    weights["action.weight"] = lin.weight.detach().cpu().numpy().astype(np.float32)
+    weights["action.bias"] = lin.bias.detach().cpu().numpy().astype(np.float32)
     weights["log_std"] = policy.log_std.detach().cpu().numpy().astype(np.float32)
     config = {
         "format": MODEL_FORMAT,
-        "arch": {"hidden": policy.hidden, "activation": policy.set_activation},
+        "arch": {
+            "hidden": policy.hidden,
+            "activation": policy.set_activation,
+            "bounded_mean": policy.bounded_mean,
+        },
         "feature_scales": dict(policy.feature_scales),
     }
     return weights, config

@@ -29,14 +29,16 @@ from fov_marl.training.set_policy import (  # noqa: E402
 SCALES = default_feature_scales(make_config(scenario="coverage"))
 
 
-def _policy(ctde: bool = False, n_agents: int = 6, seed: int = 0) -> SetActorCriticPolicy:
+def _policy(
+    ctde: bool = False, n_agents: int = 6, seed: int = 0, bounded: bool = True
+) -> SetActorCriticPolicy:
     """A policy with random (not SB3-initialised) weights, so outputs are far from 0."""
     torch.manual_seed(seed)
     d = (10 if ctde else 5) * (n_agents - 1) + 7
     space = gym.spaces.Box(-1e3, 1e3, (d,), np.float32)
     pol = SetActorCriticPolicy(
         space, gym.spaces.Box(-1, 1, (3,), np.float32), lambda _: 3e-4,
-        ctde=ctde, feature_scales=SCALES, hidden=16,
+        ctde=ctde, feature_scales=SCALES, hidden=16, bounded_mean=bounded,
     )  # fmt: skip
     with torch.no_grad():
         for p in pol.parameters():
@@ -68,9 +70,12 @@ def _torch_mean(pol: SetActorCriticPolicy, obs: np.ndarray) -> np.ndarray:
         return pol.action_net(pol.mlp_extractor.forward_actor(t)).numpy()
 
 
-@pytest.mark.parametrize("n_agents", [1, 2, 4, 6, 9, 12])
-def test_numpy_forward_equals_torch_actor(n_agents):
-    pol = _policy()
+@pytest.mark.parametrize(
+    "n_agents, bounded", [(1, True), (2, True), (4, True), (6, True), (9, True), (12, True),
+                          (3, False), (12, False)]
+)  # fmt: skip
+def test_numpy_forward_equals_torch_actor(n_agents, bounded):
+    pol = _policy(bounded=bounded)
     w, cfg = actor_weights(pol)
     obs = _obs(np.random.default_rng(n_agents), 16, n_agents)
     got = SetActorWeights(w, cfg).mean_action(obs)
