@@ -223,10 +223,12 @@ class SetActorCriticPolicy(ActorCriticPolicy):
 
     Extra keyword arguments (``policy_kwargs``): ``hidden`` (64), ``set_activation``
     (``"tanh"``), ``ctde`` (False), ``feature_scales`` (required: the training
-    scenario's :func:`default_feature_scales`), ``bounded_mean`` (True: the Gaussian's
-    mean is ``tanh(A z + b)``, inside the action box, so penalties on the applied action
-    keep a gradient; an unbounded mean drifts far outside ``[-1, 1]``, where every
-    sample is clipped to the same action).
+    scenario's :func:`default_feature_scales`), ``bounded_mean`` (the Gaussian's mean is
+    ``tanh(A z + b)``, inside the action box, so penalties on the applied action keep a
+    gradient; an unbounded mean drifts far outside ``[-1, 1]``, where every sample is
+    clipped to the same action). Its default here is False so that models saved before
+    the option load as they were; :func:`~fov_marl.training.train` passes True unless
+    ``policy_kwargs={"bounded_mean": false}``.
     """
 
     def __init__(
@@ -239,7 +241,7 @@ class SetActorCriticPolicy(ActorCriticPolicy):
         set_activation: str = "tanh",
         ctde: bool = False,
         feature_scales: dict[str, Any] | None = None,
-        bounded_mean: bool = True,
+        bounded_mean: bool = False,
         **kwargs: Any,
     ) -> None:
         if feature_scales is None:

@@ -9,6 +9,17 @@ One network is shared by every robot (:mod:`fov_marl.training.vec_env`: each age
 each env copy is one VecEnv slot), and each robot acts on its own observation only:
 training is centralised in data, execution is decentralised.
 
+Architectures: ``arch="mlp"`` (SB3's ``MlpPolicy``, observations normalised by
+``VecNormalize``, one team size) or ``arch="set"`` (PPO,
+:mod:`fov_marl.training.set_policy`: permutation-invariant over neighbour slots, one set
+of weights for any N, fixed feature scales instead of observation normalisation,
+``ctde=True`` for a critic reading the agent-centric global state; reward shaping terms
+``eta_level_coef``, ``blind_motion_coef``, ``action_cost_coef``, ``fov_keep_coef``,
+``intervention_coef`` are documented in
+:class:`~fov_marl.training.set_policy.CtdeVecEnvWrapper`). A set model exports with
+:func:`fov_marl.training.export_policy` to the numpy policy ``make_policy("learned",
+env, path=...)``; ``fov-marl train --arch set`` does it into ``OUT/export``.
+
 Timesteps
 ---------
 SB3 counts *samples*: one robot-step is one timestep, so ``timesteps = T`` is
@@ -453,6 +464,7 @@ POLICY_KWARGS_SPECS: dict[str, dict[str, tuple[str, float, float]]] = {
         "log_std_init": ("real", -20.0, 20.0),
         "share_features_extractor": ("bool", 0, 0),
         "hidden": ("int", 4, 1024),
+        "bounded_mean": ("bool", 0, 0),
     },
     "sac": {
         "net_arch": ("net_arch", 1, 1024),
@@ -875,6 +887,7 @@ def train(
         pk = dict(sb3_kwargs.get("policy_kwargs") or {})
         pk.pop("net_arch", None)
         pk.pop("activation_fn", None)
+        pk.setdefault("bounded_mean", True)
         pk.update(ctde=ctde, feature_scales=feature_scales)
         sb3_kwargs["policy_kwargs"] = pk
     shaping = (
