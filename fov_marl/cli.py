@@ -149,6 +149,16 @@ def _check_policy(args: argparse.Namespace) -> Any | None:
     """``--policy``: a registered name (returns None) or a trained model (returns it
     loaded), checked before any episode runs."""
     policy = args.policy
+    from fov_marl.evaluation import is_exported_policy
+
+    if is_exported_policy(policy):  # an exported set policy: numpy, any N
+        from fov_marl.baselines.learned import SetActorWeights
+
+        try:
+            SetActorWeights.load(policy)
+        except ValueError as exc:
+            raise CliError(f"--policy {_one_line(exc)}") from None
+        return None
     if _is_model(policy):
         try:
             from fov_marl.training import load_policy  # torch only for learned policies
@@ -483,8 +493,10 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument(
             "--policy",
             default=policy_default,
-            help="registered policy (pfcbf, ideal, lloyd-pf, random) or PATH to a trained "
-            f"model.zip or run folder (default: {policy_default})",
+            help="registered policy (pfcbf, ideal, lloyd-pf, random, learned: the shipped "
+            "size-independent model) or PATH to a trained model.zip, its run folder, or an "
+            "exported set policy folder (weights.npz + config.json, any --n-agents) "
+            f"(default: {policy_default})",
         )
         sp.add_argument(
             "--n-agents",

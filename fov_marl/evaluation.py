@@ -52,6 +52,7 @@ __all__ = [
     "episode_job",
     "run_episodes",
     "is_model_path",
+    "is_exported_policy",
 ]
 
 #: Normalised coverage threshold: ``time_to_eta_norm_s`` is the first time η reaches this
@@ -318,23 +319,44 @@ def run_episode(
 
 
 def is_model_path(policy: Any) -> bool:
-    """True when ``policy`` names a trained model (a ``.zip`` file or a run folder)."""
+    """True when ``policy`` names a trained SB3 model (a ``.zip`` file or a run folder)."""
     import os
 
-    return isinstance(policy, str) and (policy.endswith(".zip") or os.path.isdir(policy))
+    return (
+        isinstance(policy, str)
+        and (policy.endswith(".zip") or os.path.isdir(policy))
+        and not is_exported_policy(policy)
+    )
+
+
+def is_exported_policy(policy: Any) -> bool:
+    """True when ``policy`` is a folder holding an exported set policy (``weights.npz``
+    and ``config.json``, :mod:`fov_marl.baselines.learned`), run with numpy for any N."""
+    import os
+
+    return (
+        isinstance(policy, str)
+        and os.path.isfile(os.path.join(policy, "weights.npz"))
+        and os.path.isfile(os.path.join(policy, "config.json"))
+    )
 
 
 def episode_job(job: dict[str, Any], on_step: Callable[[Any, dict], None] | None = None) -> dict:
     """One episode from a picklable job, as its JSON-ready record (a backend task).
 
-    ``job`` holds :func:`run_episode` keywords; ``job["policy"]`` is a registered name
-    or the path of a trained model (loaded here, in the worker: its ``config.json``
-    fills the config fields the job does not give, and its safety filter applies).
+    ``job`` holds :func:`run_episode` keywords; ``job["policy"]`` is a registered name,
+    the folder of an exported set policy (:func:`is_exported_policy`: the numpy
+    ``learned`` policy with those weights, on the job's config) or the path of a trained
+    model (loaded here, in the worker: its ``config.json`` fills the config fields the
+    job does not give, and its safety filter applies).
     ``on_step`` is forwarded to :func:`run_episode` (in-process progress).
     """
     job = dict(job)
     policy = job.pop("policy")
-    if is_model_path(policy):
+    if is_exported_policy(policy):  # numpy forward pass, any N, no torch
+        rec = run_episode(policy="learned", policy_kwargs={"path": policy}, on_step=on_step, **job)
+        rec.policy = str(policy)
+    elif is_model_path(policy):
         from fov_marl.training import load_policy  # torch only for learned policies
 
         loaded = load_policy(policy)

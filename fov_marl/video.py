@@ -140,9 +140,12 @@ def render_episode(
         label = f"{loaded.name} ({label})"
     else:
         from fov_marl.baselines import make_policy
+        from fov_marl.evaluation import is_exported_policy
+
+        kw = {"path": policy} if is_exported_policy(policy) else {}
 
         def factory_base(env: Any) -> Any:
-            return make_policy(policy, env)
+            return make_policy("learned" if kw else policy, env, **kw)
 
         label = policy
     frames: list[np.ndarray] = []

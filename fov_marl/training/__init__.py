@@ -8,6 +8,10 @@
   PettingZoo -> SB3 VecEnv adapter (one slot per robot per env copy).
 * :mod:`fov_marl.training.trainer`: :func:`train`, :func:`load_policy`,
   :class:`LearnedPolicy`, default hyper-parameters (documented there).
+* :mod:`fov_marl.training.set_policy`: the permutation-invariant, size-independent
+  actor-critic (``arch="set"``) and its CTDE critic entries.
+* :mod:`fov_marl.training.export`: :func:`export_policy`, the actor as ``.npz`` for
+  ``make_policy("learned", env, path=...)`` (numpy, no torch).
 * :mod:`fov_marl.training.cli_support`: ``fov-marl train`` arguments and runner.
 
 Names are imported lazily so that ``import fov_marl.training.cli_support`` (done by the
@@ -27,6 +31,8 @@ __all__ = [
     "LearnedPolicy",
     "build_env",
     "DEFAULT_HYPERPARAMS",
+    "export_policy",
+    "SetActorCriticPolicy",
 ]
 
 _WHERE = {
@@ -37,6 +43,8 @@ _WHERE = {
     "LearnedPolicy": "trainer",
     "build_env": "trainer",
     "DEFAULT_HYPERPARAMS": "trainer",
+    "export_policy": "export",
+    "SetActorCriticPolicy": "set_policy",
 }
 
 

@@ -15,6 +15,8 @@ Example::
     fov-marl train --algo ppo --timesteps 1000000 --seed 0 --out runs/ppo
     fov-marl train --algo ppo --safety-filter --belief --timesteps 1000000 --out runs/ppo_fb
     fov-marl evaluate --policy runs/ppo/model.zip --episodes 10
+    fov-marl train --arch set --ctde --eta-level-coef 1 --timesteps 5e6 --out runs/set
+    fov-marl evaluate --policy runs/set/export --n-agents 10 --safety-filter
 """
 
 from __future__ import annotations
@@ -57,6 +59,21 @@ def _int_in(flag: str, lo: int, hi: int | None = None, *, sci: bool = False):
                     v = int(f)
         if v is None or v < lo or (hi is not None and v > hi):
             raise argparse.ArgumentTypeError(f"{flag} must be {allowed}, got {s!r}")
+        return v
+
+    return conv
+
+
+def _real_in(flag: str, lo: float, hi: float):
+    """argparse type: a finite real in ``[lo, hi]``."""
+
+    def conv(s: str) -> float:
+        try:
+            v = float(s)
+        except ValueError:
+            v = math.nan
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise argparse.ArgumentTypeError(f"{flag} must be a number in [{lo}, {hi}], got {s!r}")
         return v
 
     return conv
@@ -204,6 +221,60 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         "--no-progress", action="store_true", help="hide SB3's progress bar (per timestep)"
     )
     parser.add_argument("--verbose", action="store_true", help="print SB3's log table")
+    parser.add_argument(
+        "--arch",
+        choices=("mlp", "set"),
+        default="mlp",
+        help="policy network: mlp (flat observation, fixed N) or set (PPO: permutation-"
+        "invariant, any N; exported to OUT/export for make_policy('learned', env, path=...))",
+    )
+    parser.add_argument(
+        "--ctde",
+        action="store_true",
+        help="--arch set: the critic also reads the global state, agent-centric "
+        "(centralised training, decentralised execution)",
+    )
+    parser.add_argument(
+        "--eta-level-coef",
+        type=_real_in("--eta-level-coef", 0.0, 1e3),
+        default=0.0,
+        help="weight of the per-step coverage-level reward -log10(1 - eta + 1e-4) / 4, in "
+        "[0, 1000] (0: the env's reward only)",
+    )
+    parser.add_argument(
+        "--intervention-coef",
+        type=_real_in("--intervention-coef", 0.0, 1e3),
+        default=0.0,
+        help="behind --safety-filter: penalty per unit of the filter's normalised action "
+        "change, in [0, 1000]",
+    )
+    parser.add_argument(
+        "--blind-motion-coef",
+        type=_real_in("--blind-motion-coef", 0.0, 1e3),
+        default=0.0,
+        help="penalty on planar speed towards directions outside the camera sector, in "
+        "[0, 1000] (teaches 'look where you drive', which the safety filter rewards)",
+    )
+    parser.add_argument(
+        "--action-cost-coef",
+        type=_real_in("--action-cost-coef", 0.0, 1e3),
+        default=0.0,
+        help="penalty on the action energy (|v|^2 + w^2) / 2 (normalised), in [0, 1000]",
+    )
+    parser.add_argument(
+        "--fov-keep-coef",
+        type=_real_in("--fov-keep-coef", 0.0, 1e3),
+        default=0.0,
+        help="penalty on neighbours closer than 3 D_s outside the camera sector (exact "
+        "positions), in [0, 1000]: what the safety filter's FoV rows would correct",
+    )
+    parser.add_argument(
+        "--init-from",
+        metavar="MODEL.zip",
+        default=None,
+        help="start from this model's parameters (same --arch, --ctde and team size), e.g. "
+        "fine-tune behind --safety-filter after training without it",
+    )
 
 
 def _flag_of(message: str, args: argparse.Namespace) -> str:
@@ -324,11 +395,27 @@ def run_train(args: argparse.Namespace) -> Path | int:
             torch_threads=args.torch_threads,
             progress_bar=not args.no_progress,
             verbose=int(args.verbose),
+            arch=args.arch,
+            ctde=args.ctde,
+            eta_level_coef=args.eta_level_coef,
+            intervention_coef=args.intervention_coef,
+            init_from=args.init_from,
+            blind_motion_coef=args.blind_motion_coef,
+            action_cost_coef=args.action_cost_coef,
+            fov_keep_coef=args.fov_keep_coef,
         )
     except ConfigError as exc:
         flag = source_of_error(str(exc), sources) or _flag_of(str(exc), args)
         raise ValueError(f"{flag} {exc}" if flag else str(exc)) from None
     cfg = json.loads((Path(path).parent / "config.json").read_text())
+    if args.arch == "set":
+        from fov_marl.training.export import export_policy
+
+        export = export_policy(path, Path(path).parent / "export")
+        print(
+            f"exported the actor to {export} (numpy, any team size): fov-marl evaluate "
+            f"--policy {export} --n-agents N"
+        )
     if cfg.get("interrupted"):
         ckpt = Path(path).parent / "checkpoints"
         extra = f"; checkpoints in {ckpt}" if ckpt.is_dir() else ""

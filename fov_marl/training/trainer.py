@@ -9,6 +9,17 @@ One network is shared by every robot (:mod:`fov_marl.training.vec_env`: each age
 each env copy is one VecEnv slot), and each robot acts on its own observation only:
 training is centralised in data, execution is decentralised.
 
+Architectures: ``arch="mlp"`` (SB3's ``MlpPolicy``, observations normalised by
+``VecNormalize``, one team size) or ``arch="set"`` (PPO,
+:mod:`fov_marl.training.set_policy`: permutation-invariant over neighbour slots, one set
+of weights for any N, fixed feature scales instead of observation normalisation,
+``ctde=True`` for a critic reading the agent-centric global state; reward shaping terms
+``eta_level_coef``, ``blind_motion_coef``, ``action_cost_coef``, ``fov_keep_coef``,
+``intervention_coef`` are documented in
+:class:`~fov_marl.training.set_policy.CtdeVecEnvWrapper`). A set model exports with
+:func:`fov_marl.training.export_policy` to the numpy policy ``make_policy("learned",
+env, path=...)``; ``fov-marl train --arch set`` does it into ``OUT/export``.
+
 Timesteps
 ---------
 SB3 counts *samples*: one robot-step is one timestep, so ``timesteps = T`` is
@@ -85,7 +96,8 @@ plus, once per finished episode of each env copy, ``fov/team_return`` (sum over
 robots), ``fov/final_eta``, ``fov/collisions``, ``fov/safety_violations``,
 ``fov/min_distance`` (episode), crossing: ``fov/arrived``; behind the safety filter
 ``fov/filter_interventions`` (robot-steps where the filter changed the action, per
-episode and robot) and ``fov/filter_intervention_rate``.
+episode and robot) and ``fov/filter_intervention_rate``; per rollout ``fov/eta_rollout``
+(mean η over all steps) and, behind the filter, ``fov/intervention_rate_rollout``.
 """
 
 from __future__ import annotations
@@ -239,6 +251,8 @@ def make_training_vec_env(
     normalize: bool = True,
     gamma: float = 0.99,
     eta_method: str = "exact",
+    norm_obs: bool = True,
+    wrap_adapter: Callable[[Any], Any] | None = None,
 ) -> tuple[Any, Any]:
     """``(adapter, vec_env)``: the adapter, then ``VecMonitor`` and optionally ``VecNormalize``.
 
@@ -254,6 +268,9 @@ def make_training_vec_env(
     slots, observations, rewards and infos for the same seed. ``eta_method="strip"``
     (vector path, coverage only) trains on the cheaper
     :class:`~fov_marl.metrics.StripCoverageMetric` η; the default keeps the exact one.
+    ``wrap_adapter(adapter)``, if given, wraps the adapter below ``VecMonitor`` (the
+    set policy's :class:`~fov_marl.training.set_policy.CtdeVecEnvWrapper`);
+    ``norm_obs=False`` keeps ``VecNormalize`` to the rewards.
     """
     from fov_marl.envs.fov_coverage_v0 import FovCoverageEnv
     from fov_marl.envs.fov_crossing_v0 import FovCrossingEnv
@@ -299,9 +316,11 @@ def make_training_vec_env(
         adapter = ParallelEnvVecEnv(
             [lambda: first.pop() if first else env_factory() for _ in range(int(n_envs))]
         )
-    venv: Any = VecMonitor(adapter)
+    venv: Any = VecMonitor(wrap_adapter(adapter) if wrap_adapter is not None else adapter)
     if normalize:
-        venv = VecNormalize(venv, norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=gamma)
+        venv = VecNormalize(
+            venv, norm_obs=bool(norm_obs), norm_reward=True, clip_obs=10.0, gamma=gamma
+        )
     return adapter, venv
 
 
@@ -328,10 +347,30 @@ class FovMetricsCallback(BaseCallback):
         self._interventions: dict[int, int] = {}
         self._steps: dict[int, int] = {}
         self.last_episode_metrics: dict[str, float] = {}
+        self._roll = np.zeros(4)  # eta sum, eta count, interventions, filtered robot-steps
+
+    def _on_rollout_start(self) -> None:
+        self._roll[:] = 0.0
+
+    def _on_rollout_end(self) -> None:
+        """Per-rollout means: ``fov/eta_rollout`` (η over every step of every copy) and,
+        behind the filter, ``fov/intervention_rate_rollout`` (robot-steps changed)."""
+        if self._roll[1]:
+            self.logger.record("fov/eta_rollout", self._roll[0] / self._roll[1])
+        if self._roll[3]:
+            self.logger.record("fov/intervention_rate_rollout", self._roll[2] / self._roll[3])
 
     def _on_step(self) -> bool:
         infos = self.locals.get("infos", [])
         dones = self.locals.get("dones", np.zeros(len(infos), dtype=bool))
+        for info in infos[:: max(self.n_agents, 1)]:  # one slot per copy: team metrics
+            eta = info.get("metrics/eta")
+            if eta is not None:
+                self._roll[0] += float(eta)
+                self._roll[1] += 1
+        if infos and "safety/intervened" in infos[0]:
+            self._roll[2] += sum(bool(i["safety/intervened"]) for i in infos)
+            self._roll[3] += len(infos)
         ended: dict[int, list[dict]] = {}
         for info, done in zip(infos, dones, strict=True):
             k = int(info.get("env_index", 0))
@@ -424,6 +463,8 @@ POLICY_KWARGS_SPECS: dict[str, dict[str, tuple[str, float, float]]] = {
         "ortho_init": ("bool", 0, 0),
         "log_std_init": ("real", -20.0, 20.0),
         "share_features_extractor": ("bool", 0, 0),
+        "hidden": ("int", 4, 1024),
+        "bounded_mean": ("bool", 0, 0),
     },
     "sac": {
         "net_arch": ("net_arch", 1, 1024),
@@ -691,6 +732,14 @@ def train(
     safety_filter_kwargs: dict[str, Any] | None = None,
     belief_kwargs: dict[str, Any] | None = None,
     verbose: int = 0,
+    arch: str = "mlp",
+    ctde: bool = False,
+    eta_level_coef: float = 0.0,
+    intervention_coef: float = 0.0,
+    init_from: str | os.PathLike | None = None,
+    blind_motion_coef: float = 0.0,
+    action_cost_coef: float = 0.0,
+    fov_keep_coef: float = 0.0,
 ) -> Path:
     """Train one shared policy for all robots and save it; return ``out_dir/model.zip``.
 
@@ -727,6 +776,25 @@ def train(
         safety_filter_kwargs: keywords of ``SafetyFilterWrapper``.
         belief_kwargs: keywords of ``BeliefObservationWrapper``.
         verbose: SB3 verbosity (1 prints the log table to stdout).
+        arch: ``"mlp"`` (SB3's ``MlpPolicy`` over the flat observation, fixed N) or
+            ``"set"`` (PPO only: :class:`~fov_marl.training.set_policy.SetActorCriticPolicy`,
+            permutation-invariant and size-independent, exportable for
+            ``make_policy("learned", env, path=...)``; observations are not normalised,
+            rewards are). ``policy_kwargs={"hidden": k}`` sets its width (64).
+        ctde: ``arch="set"`` only: the critic also reads the global state, agent-centric
+            (:class:`~fov_marl.training.set_policy.CtdeVecEnvWrapper`).
+        eta_level_coef: weight of the coverage-level reward term, in [0, 1000]
+            (:class:`~fov_marl.training.set_policy.CtdeVecEnvWrapper`; 0: the env's reward).
+        intervention_coef: weight of the penalty on the filter's action change, in
+            [0, 1000] (behind the safety filter).
+        blind_motion_coef: weight of the penalty on driving outside the camera's sector,
+            in [0, 1000] (no filter needed).
+        action_cost_coef: weight of the action energy cost, in [0, 1000].
+        fov_keep_coef: weight of the penalty on neighbours closer than 3 D_s outside the
+            camera sector, in [0, 1000] (exact positions; no filter needed).
+        init_from: a ``model.zip`` of the same architecture and spaces whose parameters
+            start this run (fine-tuning, e.g. behind the filter after pre-training
+            without it).
 
     Returns:
         Path of the saved ``model.zip``. Ctrl-C stops training early and still saves
@@ -749,6 +817,24 @@ def train(
     safety_filter = check_bool("safety_filter", safety_filter)
     belief = check_bool("belief", belief)
     normalize = check_bool("normalize", normalize)
+    arch = check_choice("arch", arch, ("mlp", "set"))
+    ctde = check_bool("ctde", ctde)
+    if arch == "set" and algo != "ppo":
+        raise ConfigError(f"arch 'set' needs algo 'ppo', got algo {algo!r}")
+    if ctde and arch != "set":
+        raise ConfigError("ctde needs arch 'set' (the MLP actor would read the critic's state)")
+    eta_level_coef = check_real("eta_level_coef", eta_level_coef, 0.0, 1e3)
+    intervention_coef = check_real("intervention_coef", intervention_coef, 0.0, 1e3)
+    blind_motion_coef = check_real("blind_motion_coef", blind_motion_coef, 0.0, 1e3)
+    action_cost_coef = check_real("action_cost_coef", action_cost_coef, 0.0, 1e3)
+    fov_keep_coef = check_real("fov_keep_coef", fov_keep_coef, 0.0, 1e3)
+    if init_from is not None:
+        init_path = Path(init_from)
+        if init_path.is_dir():
+            init_path = init_path / "model.zip"
+        if not init_path.is_file():
+            raise ConfigError(f"init_from must be an existing model.zip, got {str(init_from)!r}")
+        init_from = init_path
     progress_bar = check_bool("progress_bar", progress_bar) and _have_progress_bar()
     if train_max_cycles is not None:
         train_max_cycles = check_int("train_max_cycles", train_max_cycles, 1, note="(or None)")
@@ -784,10 +870,50 @@ def train(
     obs_dim = int(np.prod(probe.observation_space(agent0).shape))
     act_dim = int(np.prod(probe.action_space(agent0).shape))
     probe.close()
+    if ctde:
+        obs_dim += 5 * (n_agents - 1)
 
     hp = _merged_hyperparams(algo, overrides)
     _check_buffer(algo, hp, int(n_envs) * n_agents, obs_dim, act_dim)
     sb3_kwargs = _to_sb3_kwargs(hp)
+    policy_class: Any = "MlpPolicy"
+    wrap_adapter = None
+    feature_scales = None
+    if arch == "set":
+        from fov_marl.training.set_policy import SetActorCriticPolicy, default_feature_scales
+
+        policy_class = SetActorCriticPolicy
+        feature_scales = default_feature_scales(train_config)
+        pk = dict(sb3_kwargs.get("policy_kwargs") or {})
+        pk.pop("net_arch", None)
+        pk.pop("activation_fn", None)
+        pk.setdefault("bounded_mean", True)
+        pk.update(ctde=ctde, feature_scales=feature_scales)
+        sb3_kwargs["policy_kwargs"] = pk
+    shaping = (
+        eta_level_coef,
+        intervention_coef,
+        blind_motion_coef,
+        action_cost_coef,
+        fov_keep_coef,
+    )
+    if ctde or any(shaping):
+        from fov_marl.training.set_policy import CtdeVecEnvWrapper
+
+        def wrap_adapter(adapter: Any) -> Any:
+            return CtdeVecEnvWrapper(
+                adapter,
+                n_agents,
+                ctde=ctde,
+                eta_level_coef=eta_level_coef,
+                intervention_coef=intervention_coef,
+                blind_motion_coef=blind_motion_coef,
+                fov_deg=train_config.fov_deg,
+                action_cost_coef=action_cost_coef,
+                fov_keep_coef=fov_keep_coef,
+                keep_distance_m=3.0 * train_config.safety_distance_m,
+            )
+
     out.mkdir(parents=True, exist_ok=True)
 
     prev_threads = torch.get_num_threads()
@@ -798,11 +924,24 @@ def train(
             return build_env(scenario, train_kwargs, **wrap)
 
         _, venv = make_training_vec_env(
-            int(n_envs), factory, normalize=normalize, gamma=float(hp.get("gamma", 0.99))
+            int(n_envs),
+            factory,
+            normalize=normalize,
+            gamma=float(hp.get("gamma", 0.99)),
+            norm_obs=arch == "mlp",
+            wrap_adapter=wrap_adapter,
         )
         model: BaseAlgorithm = ALGOS[algo](
-            "MlpPolicy", venv, seed=int(seed), device="cpu", verbose=verbose, **sb3_kwargs
+            policy_class, venv, seed=int(seed), device="cpu", verbose=verbose, **sb3_kwargs
         )
+        if init_from is not None:
+            try:
+                model.set_parameters(str(init_from), exact_match=True, device="cpu")
+            except _LOAD_ERRORS as exc:
+                raise ValueError(
+                    f"init_from {init_from}: not a model of this architecture and these "
+                    f"spaces ({_reason(exc)})"
+                ) from None
         formats: list[Any] = [
             TensorBoardOutputFormat(str(_next_run_dir(out / "tb", algo.upper()))),
             CSVOutputFormat(str(out / "progress.csv")),
@@ -860,6 +999,15 @@ def train(
         "wrappers": [w for w in ("safety_filter", "belief") if wrap[w]],
         **wrap,
         "normalize": bool(normalize),
+        "arch": arch,
+        "ctde": bool(ctde),
+        "eta_level_coef": float(eta_level_coef),
+        "intervention_coef": float(intervention_coef),
+        "blind_motion_coef": float(blind_motion_coef),
+        "action_cost_coef": float(action_cost_coef),
+        "fov_keep_coef": float(fov_keep_coef),
+        "init_from": None if init_from is None else str(init_from),
+        "feature_scales": feature_scales,
         "hyperparams": _jsonable(hp),
         "seed": int(seed),
         "timesteps": int(timesteps),
@@ -1020,6 +1168,10 @@ class LearnedPolicy:
         if not agents:
             return {}
         batch = np.stack([np.asarray(feats[a], dtype=np.float32) for a in agents])
+        if self.config.get("ctde", False):  # the critic's entries: never read by the actor
+            batch = np.concatenate(
+                [batch, np.zeros((len(batch), 5 * (self.n_agents - 1)), np.float32)], axis=1
+            )
         if self._obs_norm is not None:
             batch = self._obs_norm.normalize_obs(batch).astype(np.float32)
         actions, _ = self.model.predict(batch, deterministic=True)
@@ -1169,6 +1321,8 @@ def _check_model_spaces(policy: LearnedPolicy, path: Path) -> None:
         raise ValueError(f"{path}: its config.json does not describe a valid env ({exc})") from None
     agent = env.possible_agents[0]
     want_obs = tuple(env.observation_space(agent).shape)
+    if policy.config.get("ctde", False):
+        want_obs = (want_obs[0] + 5 * (policy.n_agents - 1),)
     want_act = tuple(env.action_space(agent).shape)
     env.close()
     got_obs = tuple(getattr(policy.model.observation_space, "shape", ()) or ())
