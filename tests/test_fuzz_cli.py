@@ -516,6 +516,33 @@ SPECS: dict[str, dict[str, dict]] = {
         },
         "--checkpoint-every": {"bad": ["-1", "abc", "", "1.5", "nan"], "good": ["0", "4"]},
         "--torch-threads": {"bad": [*BAD_POSITIVE_INT, "1025"], "good": ["1", "2"]},
+        "--arch": {"bad": ["cnn", "", "SET"], "good": ["mlp", "set"]},
+        "--ctde": {"bad": ["--ctde=1", None], "good": [], "either": [None]},
+        "--eta-level-coef": {
+            "bad": ["-1", "abc", "", "nan", "inf", "1001", "1e400"],
+            "good": ["0", "1"],
+        },
+        "--blind-motion-coef": {
+            "bad": ["-1", "abc", "", "nan", "inf", "1001", "1e400"],
+            "good": ["0", "0.5"],
+        },
+        "--action-cost-coef": {
+            "bad": ["-1", "abc", "", "nan", "inf", "1001", "1e400"],
+            "good": ["0", "0.2"],
+        },
+        "--fov-keep-coef": {
+            "bad": ["-1", "abc", "", "nan", "inf", "1001", "1e400"],
+            "good": ["0", "0.5"],
+        },
+        "--intervention-coef": {
+            "bad": ["-1", "abc", "", "nan", "inf", "1001", "1e400"],
+            "good": ["0", "0.3"],
+        },
+        "--init-from": {
+            "bad": ["{ws}/afile", "{ws}/nosuch.zip", "{ws}/empty.zip"],
+            "good": ["{ws}/model/model.zip"],
+            "names": ("--init-from",),
+        },
         "--no-progress": {"bad": ["--no-progress=1"], "good": [None]},
         "--verbose": {"bad": ["--verbose=2"], "good": [None]},
         "--debug": {"bad": ["--debug=0"], "good": [None]},

@@ -354,6 +354,15 @@ def run_train(args: argparse.Namespace) -> Path | int:
     from fov_marl.validation import ConfigError
 
     out = _check_out(args)
+    if args.ctde and args.arch != "set":
+        raise ValueError("--ctde needs --arch set (an MLP actor would read the critic's state)")
+    if args.arch == "set" and args.algo != "ppo":
+        raise ValueError(f"--arch set needs --algo ppo, got --algo {args.algo}")
+    if args.init_from is not None:
+        init = Path(args.init_from)
+        init = init / "model.zip" if init.is_dir() else init
+        if not init.is_file():
+            raise ValueError(f"--init-from {args.init_from}: no such model.zip")
     scenario, env_kwargs, sources = _resolve(args)
     hyperparams = parse_hyperparams(args.hp, flag="--hp")
     try:
@@ -407,6 +416,10 @@ def run_train(args: argparse.Namespace) -> Path | int:
     except ConfigError as exc:
         flag = source_of_error(str(exc), sources) or _flag_of(str(exc), args)
         raise ValueError(f"{flag} {exc}" if flag else str(exc)) from None
+    except ValueError as exc:
+        if str(exc).startswith("init_from "):  # a file that is not a model of this kind
+            raise ValueError(f"--init-from {str(exc)[len('init_from ') :]}") from None
+        raise
     cfg = json.loads((Path(path).parent / "config.json").read_text())
     if args.arch == "set":
         from fov_marl.training.export import export_policy
