@@ -108,17 +108,18 @@ field                        default   source / reason
                                        last-seen rows and the blind travel budget still
                                        bound motion towards it (:mod:`~fov_marl.control.
                                        safety` Section 1). inf: the rows of every
-                                       separable neighbour (pfcbf); 2 m for the filter,
-                                       where diffuse beliefs gave 14% of changed
-                                       random-action robot-steps, with the true nearest
-                                       neighbour a median 13.8 m away
+                                       separable neighbour. An ablation: 2 m cut the
+                                       filter's random-action change rate from 68% to
+                                       53% but lowered its minimum distances (see the
+                                       module docstring of ``safety``)
 ``lost_fov_yield``           True      the FoV levels of neighbours the camera does not
                                        report yield when they stall the robot
                                        (:meth:`~fov_marl.control.controller.
                                        FovCbfController._yield_lost`): a crossing robot
                                        otherwise stood 7 m from its target for 150 s,
                                        pinned by three neighbours lost 25-50 s before
-                                       (seed 7); the collision rows stay
+                                       (seed 7); the collision rows stay. Off for the
+                                       safety filter (``FILTER_CONTROLLER_DEFAULTS``)
 ``lost_fov_age_s``           10.0      a neighbour counts as lost after this long unseen
                                        (s); yielding the FoV rows of every undetected
                                        neighbour slowed crossing (median arrival 58 s

@@ -66,11 +66,14 @@ add a behaviour of the filter's own to the policy's; and the blind travel budget
 policy may drive persistently into space its robot has not looked at (``pfcbf`` uses
 it in coverage too, not in crossing, where it stopped robots that keep their
 neighbours in view while sliding sideways to their targets; measured, 4 crossing
-seeds: 1-3 of 4 arrivals with it, 4 of 4 in 33 s without); and no neighbour
-half-plane for an undetected neighbour whose belief has spread beyond
-``lost_sigma_max_m = 2`` m along the line of sight (its particles still bound the
-speed towards it, :mod:`fov_marl.control.safety` Section 1; measured, random actions,
-2 x 300 steps: 53% of robot-steps changed instead of 68%).
+seeds: 1-3 of 4 arrivals with it, 4 of 4 in 33 s without); and no yielding of lost neighbours' FoV levels (``lost_fov_yield``, pfcbf's
+liveness rule for crossing): behind the filter those levels are what keeps a policy
+that never looks turning towards its neighbours. Measured with the learned policy
+(seeds 0-4) and the stress grid: with the yield, final η fell from 0.92-0.99 to
+0.47-0.99, and together with ``lost_sigma_max_m = 2`` m (no half-plane for diffuse
+undetected beliefs; it cut the random-action change rate from 68% to 53%) the
+``wait_charge`` adversary (N = 12, β = 120°, random start, seed 101) collided. Both
+stay off here; that episode is a regression test.
 
 The particle filters start from the true start poses (the paper's assumption,
 VII-B) read from ``env.unwrapped.poses`` at reset; pass ``init="uniform"`` to avoid
@@ -101,7 +104,7 @@ __all__ = ["SafetyFilterWrapper", "FILTER_CONTROLLER_DEFAULTS", "FILTER_TRACKER_
 FILTER_CONTROLLER_DEFAULTS: dict[str, Any] = {
     "deadlock_turn_deg": 0.0,
     "blind_travel_m": 1.0,
-    "lost_sigma_max_m": 2.0,
+    "lost_fov_yield": False,
 }
 #: Tracker settings of the filter that differ from :class:`TrackerParams`'s defaults.
 FILTER_TRACKER_DEFAULTS: dict[str, Any] = {"motion_model": "mixture"}  # also "auto"'s
