@@ -47,6 +47,23 @@ CONTROL_STATUSES = STATUS_CODES + ("safety_fallback",)
 _UNC, _INV, _FAIL, _SFB = 0, 4, 5, 6
 
 
+def _stalled(u: np.ndarray, u_star: np.ndarray, v_max: float) -> np.ndarray:
+    """``(R,)`` robots whose solution keeps less than a fifth of u*'s translation
+    (``u_v · v̂* < 0.2 ‖v*‖``, with ``‖v*‖ ≥ 0.1 v_max``): the trigger of "keep right"
+    and of the lost neighbours' yield (:meth:`FovCbfController._stalled`)."""
+    vs = u_star[:, :2]
+    speed = np.hypot(vs[:, 0], vs[:, 1])
+    return (speed >= 0.1 * v_max) & (np.einsum("rk,rk->r", u[:, :2], vs) < 0.2 * speed * speed)
+
+
+def _adopt(qres, alt, rows: np.ndarray, use: np.ndarray) -> None:
+    """Copy the re-solved robots ``alt[use]`` into ``qres[rows]`` (in place; ``qres.u`` is
+    copied first so a caller's array is never written)."""
+    qres.u = qres.u.copy()
+    for f in ("u", "kappa", "status", "qp_status", "fallback", "n_qp", "n_levels"):
+        getattr(qres, f)[rows] = getattr(alt, f)[use]
+
+
 @dataclass
 class BatchControlResult:
     """Outcome of :meth:`BatchedFovCbfController.solve` for ``R`` robots with ``M`` neighbours.
@@ -485,10 +502,8 @@ class BatchedFovCbfController:
     def _unblock(self, qres, Aq, bq, lv, actq, usq, n_fov, skeep) -> None:
         """:meth:`FovCbfController._unblock` for the robots that need it (in place on qres)."""
         vs = usq[:, :2]
-        speed = np.hypot(vs[:, 0], vs[:, 1])
         u = qres.u
-        cand = (speed >= 0.1 * self.config.v_max_mps) & ~qres.fallback & skeep.any(axis=1)
-        cand &= np.einsum("rk,rk->r", u[:, :2], vs) < 0.2 * speed * speed
+        cand = _stalled(u, usq, self.config.v_max_mps) & ~qres.fallback & skeep.any(axis=1)
         if not cand.any():
             return
         srow = np.einsum("rkn,rn->rk", Aq[:, n_fov:], u) + bq[:, n_fov:]
@@ -507,21 +522,12 @@ class BatchedFovCbfController:
         use = ~alt.fallback & ~(gain_alt <= gain_cur + 1e-9)
         if not use.any():
             return
-        w = c_i[use]
-        for f in ("u", "kappa", "status", "qp_status", "fallback", "n_qp", "n_levels"):
-            arr = getattr(qres, f)
-            if f == "u" and arr is u:
-                arr = arr.copy()
-                qres.u = arr
-            arr[w] = getattr(alt, f)[use]
+        _adopt(qres, alt, c_i[use], use)
 
     def _yield_lost(self, qres, Aq, bq, lv, actq, usq, lost) -> None:
         """:meth:`FovCbfController._yield_lost` for the robots that need it (in place on qres)."""
-        vs = usq[:, :2]
-        speed = np.hypot(vs[:, 0], vs[:, 1])
         u = qres.u
-        cand = lost.any(axis=1) & ~qres.fallback & (speed >= 0.1 * self.config.v_max_mps)
-        cand &= np.einsum("rk,rk->r", u[:, :2], vs) < 0.2 * speed * speed
+        cand = _stalled(u, usq, self.config.v_max_mps) & ~qres.fallback & lost.any(axis=1)
         if not cand.any():
             return
         c_i = np.flatnonzero(cand)
@@ -532,15 +538,9 @@ class BatchedFovCbfController:
         use = ~alt.fallback & (cost_alt <= 0.5 * cost_cur)
         if not use.any():
             return
-        w = c_i[use]
         alt.n_qp = alt.n_qp + qres.n_qp[c_i]
         alt.kappa = np.where(lost[c_i], 0.0, alt.kappa)
-        for f in ("u", "kappa", "status", "qp_status", "fallback", "n_qp", "n_levels"):
-            arr = getattr(qres, f)
-            if f == "u" and arr is u:
-                arr = arr.copy()
-                qres.u = arr
-            arr[w] = getattr(alt, f)[use]
+        _adopt(qres, alt, c_i[use], use)
 
     def _safe_fallback(self, u_qp, A, b, kind, keep) -> np.ndarray:
         """:meth:`FovCbfController._safe_fallback` for ``(F,)`` robots (u_qp NaN rows: None)."""

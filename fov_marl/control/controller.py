@@ -334,6 +334,13 @@ class FovCbfController:
         res.u = u
         return res
 
+    def _stalled(self, u: np.ndarray, u_star: np.ndarray) -> bool:
+        """The solution keeps less than a fifth of u*'s translation (``u_v · v̂* < 0.2 ‖v*‖``,
+        with ``‖v*‖ ≥ 0.1 v_max``): the trigger of :meth:`_unblock` and :meth:`_yield_lost`."""
+        vs = u_star[:2]
+        speed = math.hypot(vs[0], vs[1])
+        return speed >= 0.1 * self.config.v_max_mps and u[:2] @ vs < 0.2 * speed * speed
+
     def _unblock(self, qres, A_q, b_q, l_q, u_star: np.ndarray, n_fov: int):
         """Deadlock resolution ("keep right", not in the paper): ``params.deadlock_turn_deg``.
 
@@ -347,10 +354,7 @@ class FovCbfController:
         changed: every row still holds (the result is a solution of the same hierarchy).
         """
         vs = u_star[:2]
-        speed = math.hypot(vs[0], vs[1])
-        if speed < 0.1 * self.config.v_max_mps or qres.fallback:
-            return qres
-        if qres.u[:2] @ vs >= 0.2 * speed * speed:
+        if qres.fallback or not self._stalled(qres.u, u_star):
             return qres
         binding = (A_q[n_fov:] @ qres.u + b_q[n_fov:]) < 1e-3
         if not binding.any():
@@ -382,11 +386,7 @@ class FovCbfController:
         Returns:
             the QP result to use (κ of the dropped rows is 0).
         """
-        vs = u_star[:2]
-        speed = math.hypot(vs[0], vs[1])
-        if not lost.any() or qres.fallback or speed < 0.1 * self.config.v_max_mps:
-            return qres
-        if qres.u[:2] @ vs >= 0.2 * speed * speed:
+        if not lost.any() or qres.fallback or not self._stalled(qres.u, u_star):
             return qres
         keep = ~lost
         alt = self._qp_solve(A_q[keep], b_q[keep], l_q[keep], u_star)
