@@ -186,16 +186,21 @@ def test_filter_regressions_collide_without_the_new_rows(episode, off):
 
 
 @pytest.mark.slow
-def test_filter_random_actions_long_episodes_change_rate_is_reported():
-    """Random actions behind the filter, N = 6, β = 120°, 5 episodes x 1000 steps: no
-    collision, and the share of changed robot-steps stays below 0.9 (measured with the
-    shipped filter on 5 x 1000 steps: 0.80-0.90, mean 0.845; 0.68 on 2 x 300 steps: it
-    grows with the time the beliefs go unrefreshed. The issue's goal of 0.30 is not met:
-    the neighbour rows of diffuse beliefs, the blind rows and the blind travel budget do
-    most of it; ``lost_sigma_max_m = 2`` gave 0.64-0.73 but let an adversary collide)."""
+@pytest.mark.parametrize("fov_deg, bound", [(120.0, 0.9), (360.0, 0.45)])
+def test_filter_random_actions_long_episodes_change_rate_is_reported(fov_deg, bound):
+    """Random actions behind the filter, N = 6, 5 episodes x 1000 steps: no collision, and
+    the share of changed robot-steps stays below what was measured with the shipped
+    filter. At β = 120°: 0.80-0.90, mean 0.845; 0.67 over 2 x 300 steps. It grows with
+    the time the beliefs go unrefreshed. At β = 360°: 0.32-0.41, mean 0.386, mostly from
+    the Gaussian half-planes of neighbours beyond R_d. The issue's goal of 0.30 is not met.
+    The neighbour rows of diffuse beliefs, the blind rows and the blind travel budget do
+    most of it; ``lost_sigma_max_m = 2`` gave 0.64-0.73 at 120° but let an adversary
+    collide."""
     rates = []
     for seed in range(5):
-        rec = run_episode("coverage", "random", seed, safety_filter=True, n_agents=6)
+        rec = run_episode(
+            "coverage", "random", seed, safety_filter=True, n_agents=6, fov_deg=fov_deg
+        )
         assert rec.collisions == 0
         rates.append(rec.intervention_rate)
-    assert np.mean(rates) < 0.9, rates
+    assert np.mean(rates) < bound, rates
