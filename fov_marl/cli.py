@@ -38,6 +38,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from fov_marl.filter_options import add_filter_arguments, filter_kwargs
 from fov_marl.tables import format_table
 from fov_marl.validation import check_out_dir, check_out_file
 
@@ -275,6 +276,13 @@ def _workers(args: argparse.Namespace) -> int:
     return (os.cpu_count() or 1) if args.backend == "ray" else 1
 
 
+def _filter_kwargs(args: argparse.Namespace, loaded: Any | None) -> dict[str, Any] | None:
+    """``--filter-tracker`` / ``--filter-controller`` (:mod:`fov_marl.filter_options`); a
+    model trained behind the filter runs behind it without ``--safety-filter``."""
+    on = bool(args.safety_filter or getattr(loaded, "safety_filter", False))
+    return filter_kwargs(args.filter_tracker, args.filter_controller, on)
+
+
 def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     from fov_marl.evaluation import run_episodes, summarize
 
@@ -283,6 +291,7 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     _check_backend(args)
     loaded = _check_policy(args)
     env_kwargs = _check_config(args, loaded)
+    sf_kwargs = _filter_kwargs(args, loaded)
     records = run_episodes(
         args.scenario,
         args.policy,
@@ -292,6 +301,7 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
         workers=_workers(args),
         ray_address=args.ray_address,
         progress=not args.quiet,
+        safety_filter_kwargs=sf_kwargs,
         **env_kwargs,
     )
     summary = summarize(records)
@@ -333,6 +343,7 @@ def run_render(args: argparse.Namespace) -> Path:
     base = dict(loaded.env_kwargs) if loaded is not None else {}
     cfg = make_config(scenario=args.scenario, **{**base, **env_kwargs})
     beliefs = parse_beliefs_of(args.beliefs_of, cfg.n_agents)
+    sf_kwargs = _filter_kwargs(args, loaded)
     steps = cfg.max_cycles
     frames = -(-steps // args.every)
     if frames > MAX_RENDER_FRAMES:  # render_episode keeps them all, even for a .png
@@ -351,6 +362,7 @@ def run_render(args: argparse.Namespace) -> Path:
         fps=args.fps,
         beliefs_of=beliefs,
         legend=not args.no_legend,
+        safety_filter_kwargs=sf_kwargs,
         **env_kwargs,
     )
     print(f"wrote {path}")
@@ -523,6 +535,7 @@ def build_parser() -> argparse.ArgumentParser:
             action="store_true",
             help="wrap the env in SafetyFilterWrapper (the policy's actions become u*)",
         )
+        add_filter_arguments(sp)
         sp.add_argument(
             "--max-cycles",
             type=_positive_int("--max-cycles"),

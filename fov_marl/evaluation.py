@@ -62,8 +62,17 @@ ETA_NORM_THRESHOLD = 0.95
 SCENARIOS = {"coverage": fov_coverage_v0, "crossing": fov_crossing_v0}
 
 
-def make_env(scenario: str, safety_filter: bool = False, render_mode: str | None = None, **kw):
+def make_env(
+    scenario: str,
+    safety_filter: bool = False,
+    render_mode: str | None = None,
+    safety_filter_kwargs: dict[str, Any] | None = None,
+    **kw,
+):
     """Build a scenario's ParallelEnv, optionally behind the SafetyFilterWrapper.
+
+    ``safety_filter_kwargs``: keywords of :class:`~fov_marl.wrappers.SafetyFilterWrapper`
+    (e.g. ``{"tracker_params": {"n_particles_total": 500}}``), used with ``safety_filter``.
 
     Raises:
         ValueError: unknown scenario or invalid config keyword/value.
@@ -74,7 +83,7 @@ def make_env(scenario: str, safety_filter: bool = False, render_mode: str | None
     if safety_filter:
         from fov_marl.wrappers import SafetyFilterWrapper
 
-        env = SafetyFilterWrapper(env)
+        env = SafetyFilterWrapper(env, **(safety_filter_kwargs or {}))
     return env
 
 
@@ -154,6 +163,7 @@ def run_episode(
     on_step: Callable[[Any, dict], None] | None = None,
     render_mode: str | None = None,
     policy_kwargs: dict[str, Any] | None = None,
+    safety_filter_kwargs: dict[str, Any] | None = None,
     **env_kwargs: Any,
 ) -> EpisodeRecord:
     """Run one seeded episode and measure it.
@@ -168,9 +178,16 @@ def run_episode(
         stop_at_eta: end the episode once η reaches this value (saves time in sweeps
             that only need the time to η = 0.99).
         on_step: called as ``on_step(env, infos)`` after every step (rendering).
+        safety_filter_kwargs: keywords of the filter (:func:`make_env`).
         **env_kwargs: config fields for the env.
     """
-    env = make_env(scenario, safety_filter=safety_filter, render_mode=render_mode, **env_kwargs)
+    env = make_env(
+        scenario,
+        safety_filter=safety_filter,
+        render_mode=render_mode,
+        safety_filter_kwargs=safety_filter_kwargs,
+        **env_kwargs,
+    )
     name = policy if isinstance(policy, str) else getattr(policy, "__name__", "custom")
     pol = (
         make_policy(policy, env, **(policy_kwargs or {}))
@@ -361,6 +378,8 @@ def episode_job(job: dict[str, Any], on_step: Callable[[Any, dict], None] | None
 
         loaded = load_policy(policy)
         job = {**loaded.env_kwargs, **job}
+        if loaded.safety_filter and not job.get("safety_filter_kwargs"):
+            job["safety_filter_kwargs"] = loaded.safety_filter_kwargs or None  # as trained
         job["safety_filter"] = job.get("safety_filter") or loaded.safety_filter
         rec = run_episode(policy=loaded.factory, on_step=on_step, **job)
         rec.policy = str(policy)
@@ -379,6 +398,7 @@ def run_episodes(
     workers: int = 1,
     ray_address: str | None = None,
     progress: bool = False,
+    safety_filter_kwargs: dict[str, Any] | None = None,
     **env_kwargs: Any,
 ) -> list[EpisodeRecord]:
     """Run one seeded episode per seed on a backend (:mod:`fov_marl.backends`).
@@ -392,6 +412,8 @@ def run_episodes(
         ray_address: an existing Ray cluster for ``backend="ray"``.
         progress: a progress bar on stderr (per simulated step in this process, per
             finished episode otherwise; tqdm or rich, nothing if neither is installed).
+        safety_filter_kwargs: keywords of the filter (:func:`make_env`); None: its
+            defaults (a trained model's own filter options when it was trained behind one).
         **env_kwargs: config fields.
 
     Returns:
@@ -401,9 +423,10 @@ def run_episodes(
     from fov_marl.backends import map_jobs, progress_bar
     from fov_marl.config import make_config
 
+    extra = {"safety_filter_kwargs": safety_filter_kwargs} if safety_filter_kwargs else {}
     jobs = [
         dict(scenario=scenario, policy=policy, seed=int(s), safety_filter=safety_filter,
-             **env_kwargs)
+             **extra, **env_kwargs)
         for s in seeds
     ]  # fmt: skip
     # the bar counts env steps, each episode at most ``limit`` (a model's own horizon

@@ -642,6 +642,9 @@ def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
         "(e.g. --env safety_distance_m=2.5); overrides --config",
     )
     p.add_argument("--no-filter", action="store_true", help="run the adversaries unfiltered")
+    from fov_marl.filter_options import add_filter_arguments
+
+    add_filter_arguments(p, when="unless --no-filter")
     p.add_argument("--json", default=None, metavar="OUT.json", help="also write the rows here")
     p.add_argument(
         "--fail-on-collision",
@@ -741,6 +744,16 @@ def _cases_from_args(args: argparse.Namespace) -> list[StressCase]:
         except ConfigError as exc:
             src = source_of_error(str(exc), sources) or next(iter(sources.values()))
             raise ValueError(f"{src}: {' '.join(str(exc).split())}") from None
+    from fov_marl.filter_options import filter_kwargs
+
+    sf = filter_kwargs(
+        getattr(args, "filter_tracker", None),
+        getattr(args, "filter_controller", None),
+        filtered,
+        off_hint="drop --no-filter",
+    )
+    if sf:
+        cases = [StressCase(**{**c.describe(), "filter_kwargs": sf}) for c in cases]
     return cases
 
 

@@ -103,6 +103,7 @@ def render_episode(
     *,
     beliefs_of: str | list[int] = "robot_0",
     legend: bool = True,
+    safety_filter_kwargs: dict[str, Any] | None = None,
     **env_kwargs: Any,
 ) -> Path:
     """Run one episode and save every ``every``-th frame to ``out`` (.gif/.mp4/.png).
@@ -122,6 +123,9 @@ def render_episode(
             filtered, else the policy's (PF+CBF policies); policies without a
             pipeline that define ``draw(canvas)`` draw their own layer.
         legend: draw the legend.
+        safety_filter_kwargs: keywords of the filter
+            (:func:`fov_marl.evaluation.make_env`); None: its defaults, or a trained
+            model's own filter options.
         **env_kwargs: config fields.
     """
     from fov_marl.envs.rendering import draw_beliefs, frame_title, render_frame
@@ -134,6 +138,8 @@ def render_episode(
 
         loaded = load_policy(policy)
         env_kwargs = {**loaded.env_kwargs, **env_kwargs}
+        if loaded.safety_filter and not safety_filter_kwargs:
+            safety_filter_kwargs = loaded.safety_filter_kwargs or None  # as trained
         safety_filter = bool(safety_filter or loaded.safety_filter)
         factory_base = loaded.factory
         label = Path(policy).parent.name if Path(policy).suffix == ".zip" else Path(policy).name
@@ -190,5 +196,13 @@ def render_episode(
         state["k"] += 1
 
     factory.__name__ = label
-    run_episode(scenario, factory, seed, safety_filter=safety_filter, on_step=on_step, **env_kwargs)
+    run_episode(
+        scenario,
+        factory,
+        seed,
+        safety_filter=safety_filter,
+        on_step=on_step,
+        safety_filter_kwargs=safety_filter_kwargs,
+        **env_kwargs,
+    )
     return save_frames(frames, Path(out), fps=fps)

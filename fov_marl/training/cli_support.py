@@ -120,6 +120,9 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="train behind SafetyFilterWrapper (the policy's actions become u*)",
     )
+    from fov_marl.filter_options import add_filter_arguments
+
+    add_filter_arguments(parser)
     parser.add_argument(
         "--belief",
         action="store_true",
@@ -363,6 +366,9 @@ def run_train(args: argparse.Namespace) -> Path | int:
         init = init / "model.zip" if init.is_dir() else init
         if not init.is_file():
             raise ValueError(f"--init-from {args.init_from}: no such model.zip")
+    from fov_marl.filter_options import filter_kwargs
+
+    sf_kwargs = filter_kwargs(args.filter_tracker, args.filter_controller, args.safety_filter)
     scenario, env_kwargs, sources = _resolve(args)
     hyperparams = parse_hyperparams(args.hp, flag="--hp")
     try:
@@ -391,6 +397,7 @@ def run_train(args: argparse.Namespace) -> Path | int:
             args.algo,
             scenario,
             safety_filter=args.safety_filter,
+            safety_filter_kwargs=sf_kwargs,
             belief=args.belief,
             belief_kwargs={"init": args.belief_init} if args.belief else None,
             timesteps=args.timesteps,
