@@ -9,6 +9,11 @@ of ``N − 1`` neighbour entries and its own cue; the entries go through one sha
 effect), and the pooled vectors, the count of detections and the encoded cue feed the
 action head. Permuting the neighbour slots leaves the action unchanged.
 
+The shipped model was trained behind :class:`~fov_marl.wrappers.SafetyFilterWrapper`.
+Run it behind the filter (``fov-marl evaluate --policy learned --safety-filter``): alone,
+it collides. Measured without the filter, N = 6, 20 seeds: collisions in every episode.
+With it: 0 collisions, and final η about pfcbf's (README, "Learned policy").
+
 >>> from fov_marl.baselines import make_policy
 >>> policy = make_policy("learned", env)                 # the shipped model, any N
 >>> policy = make_policy("learned", env, path="runs/set/export")   # a user's export

@@ -147,8 +147,10 @@ zeroes ``e`` when its bearing comes within the camera's view), and the row
     n_e · v ≤ max(0, (B − ‖e‖) / dt),     n_e = e / ‖e‖ in Σ_i,   B = ``blind_travel_m``
 
 lets it get at most ``B`` further from where it last looked along that direction
-(B = 1 m for ``SafetyFilterWrapper`` and for ``pfcbf`` in coverage, where dense teams
-slid blind into neighbours never seen; off for ``pfcbf`` in crossing, whose robots it
+(B = 1 m for ``pfcbf`` in coverage, where dense teams slid blind into neighbours never
+seen; 0.5 m for ``SafetyFilterWrapper``, whose 1 m let an adversary drive along the edge
+of a 45° view into a neighbour parked just outside it, see
+:mod:`fov_marl.wrappers.safety_filter`; off for ``pfcbf`` in crossing, whose robots it
 stalled: :data:`fov_marl.baselines.pfcbf.PFCBF_COVERAGE_DEFAULTS`).
 Net displacement, not path length: jitter cancels, and moving back undoes travel.
 ``e`` leaks with time constant ``T`` (``blind_travel_memory_s``, 30 s: the creep it

@@ -52,15 +52,22 @@ learner dominates) and after 2.6 M timesteps covers as well as pfcbf (final η w
 noise). Behind :class:`~fov_marl.wrappers.VectorSafetyFilterWrapper` training runs at
 ~400-600 samples/s. An unbounded Gaussian mean saturates far outside ``[-1, 1]``
 (full-speed circling or jitter to hold a position), where the action-based shaping terms
-lose their gradient: hence ``bounded_mean``. The filter changes ~90% of the shipped
-policy's actions and freezes robots that drive without looking at their neighbours
-(their beliefs spread; the blind rows stop them), which costs η; 200 k timesteps behind
-the filter with ``intervention_coef = 0.3`` did not lower that rate. The root cause,
-measured: the policies never stop. The median commanded speed is v_max in every
-100-step window of the episode, while pfcbf's u* drops to 0 once the team has settled.
-A from-scratch run with ``bounded_mean`` and ``action_cost_coef = 0.3`` covers better
-than pfcbf without the filter (final η 0.9991, above pfcbf's on 20 of 20 seeds) but still
-circles at 0.99 m/s, and reaches 0.93 behind the filter (README, "Learned policy").
+lose their gradient: hence ``bounded_mean``.
+
+Policies trained without the filter never stop. Their median commanded speed is v_max
+in every 100-step window of the episode, while pfcbf's u* drops to 0 once the team has
+settled. The filter changes ~90% of their actions and freezes robots that drive
+without looking at their neighbours, which costs η. A from-scratch run with
+``bounded_mean`` and ``action_cost_coef = 0.3`` covers better than pfcbf without the
+filter (final η 0.9991, above pfcbf's on 20 of 20 seeds). It still circles at
+0.99 m/s, and reaches only 0.93 behind the filter. Fine-tuning such a policy behind
+the filter did not change that.
+
+The shipped model was instead trained *from scratch behind the filter*, with P_T = 500
+particles: ~1,700 samples/s, 1.5 M timesteps in 911 s. It learnt to slow down (median
+commanded speed 0.25-0.32 m/s after the first 20 s) and covers behind the filter about
+as well as pfcbf. Without the filter it collides: it relies on the filter it was trained
+behind (README, "Learned policy").
 
 SB3 hooks used
 --------------

