@@ -305,6 +305,24 @@ MODEL_FILES_BAD = [
     "{ws}/afile.zip",
 ]
 
+#: --filter-tracker / --filter-controller (fov_marl.filter_options): without --safety-filter
+#: every value is an error naming the flag, so a valid one is "either" there
+BAD_FILTER_TRACKER = [
+    "nosuch=1", "n_particles_total=0", "n_particles_total=abc", "n_particles_total=1e400",
+    "foo", "=1", "motion_model=\"nope\"",
+]  # fmt: skip
+BAD_FILTER_CONTROLLER = ["nosuch=1", "safety_risk=0.9", "safety_risk=abc", "walls=2", "foo"]
+FILTER_SPECS_OFF = {
+    "--filter-tracker": {
+        "bad": BAD_FILTER_TRACKER, "good": [], "either": ["n_particles_total=500"],
+        "append": True,
+    },
+    "--filter-controller": {
+        "bad": BAD_FILTER_CONTROLLER, "good": [], "either": ["safety_risk=0.01"],
+        "append": True,
+    },
+}  # fmt: skip
+
 #: command -> flag -> {"bad": [...], "good": [...], "either": [...], "names": (...)}
 SPECS: dict[str, dict[str, dict]] = {
     "evaluate": {
@@ -333,6 +351,7 @@ SPECS: dict[str, dict[str, dict]] = {
         "--fov-deg": {"bad": BAD_FOV, "good": ["90", "360", "0.001", "1e2"]},
         "--seed": {"bad": [*BAD_NONNEG_INT, "2147483648"], "good": ["0", "7", "2147483647"]},
         "--safety-filter": {"bad": ["--safety-filter=yes"], "good": [None]},
+        **FILTER_SPECS_OFF,
         "--max-cycles": {"bad": BAD_POSITIVE_INT, "good": ["1", "3"]},
         "--episodes": {"bad": [*BAD_POSITIVE_INT, "1000001"], "good": ["1", "2"]},
         "--workers": {"bad": [*BAD_POSITIVE_INT, "257"], "good": ["1", "2"]},
@@ -377,6 +396,7 @@ SPECS: dict[str, dict[str, dict]] = {
         "--fov-deg": {"bad": BAD_FOV, "good": ["45", "360"]},
         "--seed": {"bad": BAD_NONNEG_INT, "good": ["0", "3"]},
         "--safety-filter": {"bad": ["--safety-filter=1"], "good": [None]},
+        **FILTER_SPECS_OFF,
         "--max-cycles": {
             "bad": [*BAD_POSITIVE_INT, "5000"],
             "good": ["1", "3"],
@@ -421,6 +441,7 @@ SPECS: dict[str, dict[str, dict]] = {
         "--algo": {"bad": ["dqn", "", "PPO"], "good": ["ppo", "sac"]},
         "--scenario": {"bad": ["maze", ""], "good": ["coverage", "crossing"]},
         "--safety-filter": {"bad": ["--safety-filter=1"], "good": [None]},
+        **FILTER_SPECS_OFF,
         "--belief": {"bad": ["--belief=1"], "good": [None]},
         "--belief-init": {"bad": ["x", "", "KNOWN"], "good": ["known", "uniform"]},
         "--timesteps": {
@@ -591,6 +612,17 @@ SPECS["stress"] = {
         "append": True,
     },
     "--no-filter": {"bad": ["--no-filter=1"], "good": [None]},
+    # the sweep runs behind the filter: valid values are good here
+    "--filter-tracker": {
+        "bad": BAD_FILTER_TRACKER,
+        "good": ["n_particles_total=500"],
+        "append": True,
+    },
+    "--filter-controller": {
+        "bad": BAD_FILTER_CONTROLLER,
+        "good": ["safety_risk=0.01"],
+        "append": True,
+    },
     "--json": {
         "bad": ["{ws}/afile/x.json", "{ws}/existing_dir"],
         "good": ["OUTFILE.json"],
