@@ -312,16 +312,23 @@ BAD_FILTER_TRACKER = [
     "foo", "=1", "motion_model=\"nope\"",
 ]  # fmt: skip
 BAD_FILTER_CONTROLLER = ["nosuch=1", "safety_risk=0.9", "safety_risk=abc", "walls=2", "foo"]
-FILTER_SPECS_OFF = {
-    "--filter-tracker": {
-        "bad": BAD_FILTER_TRACKER, "good": [], "either": ["n_particles_total=500"],
-        "append": True,
-    },
-    "--filter-controller": {
-        "bad": BAD_FILTER_CONTROLLER, "good": [], "either": ["safety_risk=0.01"],
-        "append": True,
-    },
-}  # fmt: skip
+
+
+def _filter_specs(filter_on: bool) -> dict[str, dict]:
+    """Specs of both filter flags; with the filter off a valid value is "either"."""
+    out = {}
+    for flag, bad, ok in (
+        ("--filter-tracker", BAD_FILTER_TRACKER, "n_particles_total=500"),
+        ("--filter-controller", BAD_FILTER_CONTROLLER, "safety_risk=0.01"),
+    ):
+        valid = {"good": [ok]} if filter_on else {"good": [], "either": [ok]}
+        out[flag] = {"bad": bad, **valid, "append": True}
+    return out
+
+
+FILTER_SPECS_OFF = _filter_specs(False)
+#: the shaping weights of ``train --arch set`` (all in [0, 1000])
+BAD_COEF = ["-1", "abc", "", "nan", "inf", "1001", "1e400"]
 
 #: command -> flag -> {"bad": [...], "good": [...], "either": [...], "names": (...)}
 SPECS: dict[str, dict[str, dict]] = {
@@ -539,26 +546,11 @@ SPECS: dict[str, dict[str, dict]] = {
         "--torch-threads": {"bad": [*BAD_POSITIVE_INT, "1025"], "good": ["1", "2"]},
         "--arch": {"bad": ["cnn", "", "SET"], "good": ["mlp", "set"]},
         "--ctde": {"bad": ["--ctde=1", None], "good": [], "either": [None]},
-        "--eta-level-coef": {
-            "bad": ["-1", "abc", "", "nan", "inf", "1001", "1e400"],
-            "good": ["0", "1"],
-        },
-        "--blind-motion-coef": {
-            "bad": ["-1", "abc", "", "nan", "inf", "1001", "1e400"],
-            "good": ["0", "0.5"],
-        },
-        "--action-cost-coef": {
-            "bad": ["-1", "abc", "", "nan", "inf", "1001", "1e400"],
-            "good": ["0", "0.2"],
-        },
-        "--fov-keep-coef": {
-            "bad": ["-1", "abc", "", "nan", "inf", "1001", "1e400"],
-            "good": ["0", "0.5"],
-        },
-        "--intervention-coef": {
-            "bad": ["-1", "abc", "", "nan", "inf", "1001", "1e400"],
-            "good": ["0", "0.3"],
-        },
+        "--eta-level-coef": {"bad": BAD_COEF, "good": ["0", "1"]},
+        "--blind-motion-coef": {"bad": BAD_COEF, "good": ["0", "0.5"]},
+        "--action-cost-coef": {"bad": BAD_COEF, "good": ["0", "0.2"]},
+        "--fov-keep-coef": {"bad": BAD_COEF, "good": ["0", "0.5"]},
+        "--intervention-coef": {"bad": BAD_COEF, "good": ["0", "0.3"]},
         "--init-from": {
             "bad": ["{ws}/afile", "{ws}/nosuch.zip", "{ws}/empty.zip"],
             "good": ["{ws}/model/model.zip"],
@@ -613,16 +605,7 @@ SPECS["stress"] = {
     },
     "--no-filter": {"bad": ["--no-filter=1"], "good": [None]},
     # the sweep runs behind the filter: valid values are good here
-    "--filter-tracker": {
-        "bad": BAD_FILTER_TRACKER,
-        "good": ["n_particles_total=500"],
-        "append": True,
-    },
-    "--filter-controller": {
-        "bad": BAD_FILTER_CONTROLLER,
-        "good": ["safety_risk=0.01"],
-        "append": True,
-    },
+    **_filter_specs(True),
     "--json": {
         "bad": ["{ws}/afile/x.json", "{ws}/existing_dir"],
         "good": ["OUTFILE.json"],
