@@ -496,12 +496,16 @@ def weighted_moments(
         ``(sum_w (B,), mean (B, 2), cov (B, 2, 2))``.
     """
     sw = np.add.reduceat(w, block_start)
+
+    def block_mean(v: np.ndarray) -> np.ndarray:  # Σ_block v / Σ_block w
+        out = np.add.reduceat(v, block_start)
+        out /= sw
+        return out
+
     t = w * x
-    mx = np.add.reduceat(t, block_start)
-    mx /= sw
+    mx = block_mean(t)
     np.multiply(w, y, out=t)
-    my = np.add.reduceat(t, block_start)
-    my /= sw
+    my = block_mean(t)
     if block_len is None:
         ex = x - mx[block_of]
         ey = y - my[block_of]
@@ -510,15 +514,12 @@ def weighted_moments(
         ey = y - np.repeat(my, block_len)
     wex = np.multiply(w, ex, out=t)
     u = wex * ex
-    cxx = np.add.reduceat(u, block_start)
-    cxx /= sw
+    cxx = block_mean(u)
     np.multiply(wex, ey, out=u)
-    cxy = np.add.reduceat(u, block_start)
-    cxy /= sw
+    cxy = block_mean(u)
     np.multiply(w, ey, out=u)
     u *= ey
-    cyy = np.add.reduceat(u, block_start)
-    cyy /= sw
+    cyy = block_mean(u)
     mean = np.stack([mx, my], -1)
     cov = np.empty((sw.shape[0], 2, 2))
     cov[:, 0, 0] = cxx
