@@ -77,7 +77,9 @@ def test_filter_wait_charge_regression():
 def test_filter_wait_charge_regression_collides_with_yield_and_sigma_cut():
     from fov_marl.stress import StressCase, run_stress_episode
 
-    cp = {"lost_fov_yield": True, "lost_sigma_max_m": 2.0}
+    # on the filter it was found with (1 m blind travel budget; with the shipped 0.5 m this
+    # episode keeps clear even with both ablations on)
+    cp = {"lost_fov_yield": True, "lost_sigma_max_m": 2.0, "blind_travel_m": 1.0}
     case = StressCase("wait_charge", 12, 120.0, "random", filter_kwargs={"controller_params": cp})
     assert run_stress_episode(case, 101, 300)["collisions"] > 0
 
