@@ -1,4 +1,5 @@
-"""Evaluation metrics: coverage efficiency η (Eq. 21), time to η, separation, collisions.
+"""Evaluation metrics: coverage efficiency η (Eq. 21), time to η, separation, collisions,
+action chatter.
 
 Ground truth for evaluation only: these functions take world positions, which no
 policy ever sees. NumPy only.
@@ -41,6 +42,14 @@ Separation metrics
 Pairs are unordered ``i < j``; two robots *collide* when their centre distance is
 below ``2 * robot_radius_m`` (``ScenarioConfig.collision_distance_m``) and *violate
 safety* when it is below D_s (``safety_distance_m``), both strict.
+
+Action chatter
+--------------
+
+:func:`action_chatter` counts the period-2 sign flips of each action component: a
+robot whose component goes ``+, −, +`` (or ``−, +, −``) on three consecutive steps,
+all three above a threshold in magnitude. A robot that reverses once (a new
+decision) is not chattering; one that alternates every step is.
 """
 
 from __future__ import annotations
@@ -56,6 +65,7 @@ from fov_marl.config import ScenarioConfig
 
 __all__ = [
     "CoverageMetric",
+    "action_chatter",
     "StripCoverageMetric",
     "coverage_efficiency_reference",
     "gaussian_mass_in_arena",
@@ -714,6 +724,29 @@ class StripCoverageMetric:
 
 
 # --------------------------------------------------------------------------- separation
+def action_chatter(actions: np.ndarray, threshold: float = 0.05) -> np.ndarray:
+    """Period-2 sign flips per action component (module docstring, "Action chatter").
+
+    Args:
+        actions: ``(T, N, A)`` actions of N robots over T consecutive steps (e.g. the
+            normalised ``[vx, vy, ω]`` in [-1, 1]).
+        threshold: magnitude at or below which a component counts as zero (no sign).
+
+    Returns:
+        ``(A,)`` int counts of steps ``t`` (1 ≤ t ≤ T − 2) and robots whose component
+        has the opposite sign of both its neighbours in time.
+    """
+    a = np.asarray(actions, dtype=np.float64)
+    if a.ndim != 3:
+        raise ValueError(f"actions must have shape (T, N, A), got {a.shape}")
+    s = np.where(np.abs(a) > threshold, np.sign(a), 0.0)
+    if s.shape[0] < 3:
+        return np.zeros(s.shape[2], dtype=np.int64)
+    prev, mid, nxt = s[:-2], s[1:-1], s[2:]
+    flip = (mid != 0) & (prev == -mid) & (nxt == -mid)
+    return flip.sum(axis=(0, 1)).astype(np.int64)
+
+
 def pairwise_distances(positions_world: np.ndarray) -> np.ndarray:
     """``(N, N)`` Euclidean centre distances (m) of ``(N, 2)`` positions; diagonal 0."""
     p = _positions(positions_world)

@@ -46,6 +46,7 @@ import numpy as np
 
 from fov_marl.config import ScenarioConfig
 from fov_marl.control import (
+    SAFETY_ROW,
     ControllerParams,
     ControlResult,
     FovCbfController,
@@ -71,6 +72,8 @@ __all__ = ["PfCbfPipeline"]
 
 Estimates = Literal["tracker", "oracle"]
 Controller = Literal["auto", "batched", "loop"]
+#: the FoV rows (left, right, range) among each neighbour's four rows
+_FOV_ROW_COLS = np.array([k for k in range(4) if k != SAFETY_ROW])
 #: the blind travel is forgotten once its direction is this far inside the view (degrees)
 _LOOK_MARGIN_DEG = 10.0
 #: ``controller="auto"`` uses the batched controller from this many env copies on. For one
@@ -298,6 +301,7 @@ class PfCbfPipeline:
         self._read_cues(obs_m)
         self._applied = np.zeros((self.n_rows, 3), dtype=np.float32)
         self._blind_travel_world = np.zeros((self.n_rows, 2))
+        self._fov_lead = np.full(self.n_rows, -1, dtype=np.int64)
         self.counters = {"interventions": 0, "fallbacks": 0, "safety_fallbacks": 0}
         self.last_results = _LazyResults(None, self.n_rows)
         self.last_batch = None
@@ -376,6 +380,7 @@ class PfCbfPipeline:
         self._applied = self._applied.copy()  # the last filter() output stays the caller's
         self._applied[rows] = 0.0
         self._blind_travel_world[rows] = 0.0
+        self._fov_lead[rows] = -1
         if self.estimates == "tracker" and self.n > 1:
             init = self._known_init(init_all)
             self.bank.reset_copies(
@@ -483,6 +488,7 @@ class PfCbfPipeline:
             last_seen_body=last,
             last_seen_age_s=age,
             blind_travel_body=None if self.estimates == "oracle" else self._blind_travel_body(),
+            particle_counts=None if parts is None else e["counts"],
         )
 
     def _oracle(self, poses_world: np.ndarray | None) -> None:
@@ -516,6 +522,25 @@ class PfCbfPipeline:
             u = coverage_desired_inputs(self._own_pose, nb, None, cfg, par).u_star
         self.last_timings["lloyd"] = time.perf_counter() - t0
         return np.asarray(u, dtype=np.float64).reshape(R, 3)
+
+    def _priority_bonus(self, ids: np.ndarray) -> np.ndarray | None:
+        """``(B N, M)`` head start in d (m) of the neighbour that led the FoV levels at
+        the previous step (``priority_hysteresis_m``; None when 0)."""
+        hyst = self.controller_params.priority_hysteresis_m
+        if hyst <= 0.0 or ids.shape[1] == 0:
+            return None
+        return np.where(ids == self._fov_lead[:, None], hyst, 0.0)
+
+    def _update_fov_lead(self, level: np.ndarray, ids: np.ndarray) -> None:
+        """Remember each robot's FoV lead: the neighbour whose FoV rows (left, right,
+        range) sit on the highest-priority FoV level of this step's solve (−1: none)."""
+        if ids.shape[1] == 0:
+            return
+        fov = level[..., _FOV_ROW_COLS]  # (R, M, 3)
+        lv = np.where(fov >= 1, fov, np.iinfo(np.int64).max).min(axis=2)  # (R, M)
+        col = np.argmin(lv, axis=1)
+        has = lv[np.arange(lv.shape[0]), col] < np.iinfo(np.int64).max
+        self._fov_lead = np.where(has, ids[np.arange(ids.shape[0]), col], -1)
 
     def _fov_yield(self, e: dict[str, np.ndarray]) -> np.ndarray | None:
         """``(R, M)`` neighbours whose FoV rows may yield when they stall their robot.
@@ -590,6 +615,7 @@ class PfCbfPipeline:
             self.last_timings["safety_rows"] = time.perf_counter() - t_rows
             det = e.get("detected")
             fov_yield = self._fov_yield(e)
+            bonus = self._priority_bonus(e["ids"])
             if self.batched is not None:
                 res = self.batched.solve(
                     u_star,
@@ -600,6 +626,7 @@ class PfCbfPipeline:
                     safety=rows,
                     detected=det,
                     fov_yield=fov_yield,
+                    priority_bonus=bonus,
                 )
                 results: Sequence[ControlResult | None] = _LazyResults(res, R)
             else:
@@ -615,6 +642,7 @@ class PfCbfPipeline:
                             safety=None if rows is None else rows.robot(i),
                             detected=det[i] if det is not None else None,
                             fov_yield=None if fov_yield is None else fov_yield[i],
+                            priority_bonus=None if bonus is None else bonus[i],
                         )
                     )
                 res = BatchControlResult.from_results(out, time.perf_counter() - t_rows)
@@ -632,6 +660,7 @@ class PfCbfPipeline:
                         ]
                     else:
                         results = _LazyResults(res, R)
+            self._update_fov_lead(res.level, e["ids"])
             self.last_batch = res
             self.last_results = results
             u = res.u.copy()

@@ -6,13 +6,14 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fov_marl.config import ScenarioConfig, make_config
 from fov_marl.metrics import (
     CoverageMetric,
     StripCoverageMetric,
+    action_chatter,
     collision_pairs,
     coverage_efficiency_reference,
     eta_single_disk_at_mean,
@@ -631,3 +632,33 @@ def test_strip_eta_bad_input():
     for bad in (np.zeros((3, 2)), np.full((1, 2, 2), np.inf)):
         with pytest.raises(ValueError, match="positions_world"):
             STRIP.eta_batch(bad)
+
+
+def _chatter_reference(a, thr):
+    T, N, A = a.shape
+    out = np.zeros(A, dtype=np.int64)
+    sign = lambda x: 0 if abs(x) <= thr else (1 if x > 0 else -1)  # noqa: E731
+    for t in range(1, T - 1):
+        for i in range(N):
+            for k in range(A):
+                p, m, n = sign(a[t - 1, i, k]), sign(a[t, i, k]), sign(a[t + 1, i, k])
+                out[k] += m != 0 and p == -m and n == -m
+    return out
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.integers(0, 12), st.integers(1, 4), st.floats(0.0, 0.5))
+def test_action_chatter_matches_the_reference(seed, T, N, thr):
+    a = np.random.default_rng(seed).uniform(-1.0, 1.0, (T, N, 3))
+    np.testing.assert_array_equal(action_chatter(a, thr), _chatter_reference(a, thr))
+
+
+def test_action_chatter_counts_alternation_not_reversal():
+    w = np.array([0.8, -0.8, 0.8, -0.8, 0.8])  # alternates: 3 inner steps flip
+    rev = np.array([0.8, 0.8, -0.8, -0.8, -0.8])  # reverses once: none
+    small = np.array([0.04, -0.04, 0.04, -0.04, 0.04])  # below the threshold
+    a = np.zeros((5, 3, 3))
+    a[:, 0, 2], a[:, 1, 2], a[:, 2, 2] = w, rev, small
+    np.testing.assert_array_equal(action_chatter(a), [0, 0, 3])
+    with pytest.raises(ValueError, match="shape"):
+        action_chatter(np.zeros((5, 3)))

@@ -202,7 +202,7 @@ class BatchedFovCbfController:
         out[chg, 2] = np.clip(p.look_gain * phi[chg], -cfg.omega_max_radps, cfg.omega_max_radps)
         return out, chg
 
-    def assign_levels(self, active, d, ids, r) -> np.ndarray:
+    def assign_levels(self, active, d, ids, r, bonus=None) -> np.ndarray:
         """:meth:`FovCbfController.assign_levels` for ``(R, M, 4)`` rows at once."""
         p = self.params
         R, M = d.shape
@@ -210,7 +210,8 @@ class BatchedFovCbfController:
         if M == 0 or R == 0:
             return level
         robot = np.repeat(np.arange(R), M)
-        order = np.lexsort((ids.reshape(-1), r.reshape(-1), d.reshape(-1), robot))
+        key = d if bonus is None else d - bonus
+        order = np.lexsort((ids.reshape(-1), r.reshape(-1), key.reshape(-1), robot))
         per_nb_rows = _FOV_ROWS if p.safety_first else np.ones(4, dtype=bool)
         cand = np.any(active & per_nb_rows, axis=2).reshape(-1)[order]
         cs = np.cumsum(cand).reshape(R, M)
@@ -297,6 +298,7 @@ class BatchedFovCbfController:
         safety: SafetyRows | tuple | None = None,
         detected: np.ndarray | None = None,
         fov_yield: np.ndarray | None = None,
+        priority_bonus: np.ndarray | None = None,
     ) -> BatchControlResult:
         """``FovCbfController.solve`` for every robot (arguments with a leading robot axis).
 
@@ -305,7 +307,8 @@ class BatchedFovCbfController:
             ids: ``(R, M)`` tie-breakers (default ``arange(M)``); safety: the robots'
             :class:`~fov_marl.control.safety.SafetyRows` (or ``(A (R,K,3), b (R,K),
             kind (R,K))``; None: from ``p_body`` as exact); detected: ``(R, M)`` bool or None;
-            fov_yield: ``(R, M)`` bool or None (see ``FovCbfController.solve``).
+            fov_yield: ``(R, M)`` bool or None; priority_bonus: ``(R, M)`` m or None (see
+            ``FovCbfController.solve``).
 
         Raises:
             ValueError: shapes that do not match.
@@ -382,7 +385,9 @@ class BatchedFovCbfController:
         if n_cone:
             cone_ok = (u_proj @ self._cone_A.T + self._cone_b).min(axis=1) >= 0.0
         unc = ~active.any(axis=(1, 2)) & (n_s == 0) & cone_ok
-        level_all = self.assign_levels(active, d, ids, np.hypot(p_body[..., 0], p_body[..., 1]))
+        level_all = self.assign_levels(
+            active, d, ids, np.hypot(p_body[..., 0], p_body[..., 1]), priority_bonus
+        )
         level_all[unc] = -2
         active = np.where(unc[:, None, None], active, level_all > -2)
         # QP rows: active FoV rows (row-major), cone rows, kept collision rows

@@ -25,7 +25,12 @@ Pipeline of :meth:`FovCbfController.solve`
    |A_ω| ω_max ≥ 0``; exact, see :func:`~fov_marl.control.cbf.row_authority`).
 3. Priority levels (Eq. 18): neighbours sorted by ascending d_ij (ties: ascending
    distance to the mean ‖ⁱp_j‖, then id: several far-reaching ellipses all give
-   d = 0, and the nearest of those neighbours is the one to look at).
+   d = 0, and the nearest of those neighbours is the one to look at), with
+   hysteresis: the neighbour that led the FoV levels at the previous step ranks with
+   d − ``params.priority_hysteresis_m`` (the pipeline passes it as ``priority_bonus``).
+   By d alone, two unseen neighbours on opposite sides with d within the estimates'
+   noise of each other swapped level 1 from step to step, and the robot turned
+   ±0.8 ω_max on alternate steps (measured: settled pfcbf team, N = 6, β = 120°).
    With ``params.safety_first`` (default) level 0 holds the safety rows of *every*
    neighbour, so avoiding a collision with any neighbour outranks keeping the nearest
    one in view; level 1, 2, … hold the FoV rows (left, right, range) of the
@@ -207,13 +212,21 @@ class FovCbfController:
         d: np.ndarray,
         ids: np.ndarray,
         r: np.ndarray | None = None,
+        bonus: np.ndarray | None = None,
     ) -> np.ndarray:
         """Priority level of every row (Eq. 18), see the module docstring.
+
+        Neighbours are ranked by ``d − bonus``: the pipeline gives the neighbour that
+        led the FoV levels at the previous step a head start of
+        ``params.priority_hysteresis_m`` (Eq. 18 orders by d_ij alone, which the
+        estimates' noise reorders from step to step when two d_ij are close, and each
+        reordering reverses the turn the FoV levels ask for).
 
         Args:
             active: ``(M, 4)`` rows that enter the QP.
             d: ``(M,)`` ellipse distances; ids: ``(M,)`` last tie-breakers.
             r: ``(M,)`` distances to the means, first tie-breakers (None: ids only).
+            bonus: ``(M,)`` head start in d (m) or None (none).
 
         Returns:
             ``(M, 4)`` int levels: −2 for rows left out (pruned, or FoV rows of the
@@ -225,7 +238,8 @@ class FovCbfController:
         level = np.full((M, 4), -2, dtype=np.int64)
         if M == 0:
             return level
-        order = np.lexsort((ids, d)) if r is None else np.lexsort((ids, r, d))
+        key = d if bonus is None else d - bonus
+        order = np.lexsort((ids, key)) if r is None else np.lexsort((ids, r, key))
         per_nb_rows = _FOV_ROWS if p.safety_first else np.ones(4, dtype=bool)
         cand = np.any(active & per_nb_rows, axis=1)[order]
         rank = np.cumsum(cand) - 1
@@ -440,6 +454,7 @@ class FovCbfController:
         safety: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
         detected: np.ndarray | None = None,
         fov_yield: np.ndarray | None = None,
+        priority_bonus: np.ndarray | None = None,
     ) -> ControlResult:
         """Safe input closest to u* (Eq. 19) under the hierarchy of Eq. 18.
 
@@ -460,6 +475,7 @@ class FovCbfController:
             fov_yield: ``(M,)`` bool, neighbours whose FoV rows yield when they stall
                 the robot (:meth:`_yield_lost`; the pipeline passes the neighbours lost
                 for at least ``params.lost_fov_age_s``); None: never.
+            priority_bonus: ``(M,)`` head start in d (m) of :meth:`assign_levels`, or None.
 
         Returns:
             :class:`ControlResult`. Non-finite inputs and solver failures give a
@@ -539,7 +555,9 @@ class FovCbfController:
                 timings={"rows": time.perf_counter() - t0, "cascade": 0.0, "final": 0.0,
                          "total": time.perf_counter() - t0},
             )  # fmt: skip
-        level = self.assign_levels(active, d, ids, np.hypot(p_body[:, 0], p_body[:, 1]))
+        level = self.assign_levels(
+            active, d, ids, np.hypot(p_body[:, 0], p_body[:, 1]), priority_bonus
+        )
         active = level > -2
         jj, rr = np.nonzero(active)
         t1 = time.perf_counter()

@@ -60,13 +60,15 @@ def _tie(s, r, safety, i, tol=1e-3):
     return bool(np.all(A @ s.u + b >= -tol) and np.all(A @ r.u + b >= -tol))
 
 
-def assert_same(cfg, params, u, p, v, d, ids, safety, det, max_ties=0, fov_yield=None):
+def assert_same(cfg, params, u, p, v, d, ids, safety, det, max_ties=0, fov_yield=None, bonus=None):
     """Batched result == per-robot results (1e-6, identical statuses and flags), except
     for at most ``max_ties`` robots whose solutions are degenerate ties (:func:`_tie`)."""
     R = u.shape[0]
     ties = 0
     batched = BatchedFovCbfController(cfg, params)
-    rb = batched.solve(u, p, v, d, ids, safety=safety, detected=det, fov_yield=fov_yield)
+    rb = batched.solve(
+        u, p, v, d, ids, safety=safety, detected=det, fov_yield=fov_yield, priority_bonus=bonus
+    )
     ctrls = [FovCbfController(cfg, params) for _ in range(R)]
     statuses = []
     for i in range(R):
@@ -75,6 +77,7 @@ def assert_same(cfg, params, u, p, v, d, ids, safety, det, max_ties=0, fov_yield
             safety=None if safety is None else safety.robot(i),
             detected=None if det is None else det[i],
             fov_yield=None if fov_yield is None else fov_yield[i],
+            priority_bonus=None if bonus is None else bonus[i],
         )  # fmt: skip
         r = rb.robot(i)
         ctx = f"robot {i}: {s.status} vs {r.status}"
@@ -141,8 +144,12 @@ def test_batched_equals_loop_property(seed, R, M):
     u, p, v, d, ids, det = _instances(rng, R, M, spread=rng.uniform(2.0, 15.0))
     rows = _rows(cfg, params, p, det, rng, with_pose=bool(rng.random() < 0.7))
     fy = ~det if rng.random() < 0.5 else None
+    # the pipeline's FoV lead: one neighbour per robot with a head start in d
+    bonus = None
+    if M and rng.random() < 0.5:
+        bonus = np.where(np.arange(M)[None, :] == rng.integers(0, M, (R, 1)), 0.5, 0.0)
     # equal, or a degenerate tie in which both solutions are safe (see assert_same)
-    assert_same(cfg, params, u, p, v, d, ids, rows, det, max_ties=1, fov_yield=fy)
+    assert_same(cfg, params, u, p, v, d, ids, rows, det, max_ties=1, fov_yield=fy, bonus=bonus)
 
 
 def test_invalid_inputs_and_no_neighbours():

@@ -298,6 +298,20 @@ def test_ties_in_d_go_to_the_nearest_mean_first():
     np.testing.assert_array_equal(lev[:, 0], [2, 1, 3])
 
 
+def test_the_previous_fov_lead_keeps_its_level_within_the_hysteresis():
+    """Eq. 18 orders by d; the lead of the previous step keeps level 1 until another
+    neighbour's d is more than its head start smaller."""
+    ctrl = FovCbfController(CFG, ControllerParams(prune=False, max_levels=8))
+    active = np.ones((2, 4), dtype=bool)
+    ids = np.arange(2)
+    for d1, first in ((1.2, 0), (0.9, 0), (0.6, 0), (0.4, 1)):
+        d = np.array([1.0, d1])
+        lev = ctrl.assign_levels(active, d, ids, None, np.array([0.5, 0.0]))
+        assert lev[first, 0] == 1, (d1, lev[:, 0])
+    lev = ctrl.assign_levels(active, np.array([1.0, 0.9]), ids, None)  # no head start
+    assert lev[1, 0] == 1
+
+
 def test_neighbour_behind_is_searched_by_turning_not_by_backing_up():
     """A hard neighbour behind (d = 0) while u* drives ahead: the default rows turn the robot
     until it sees j and never pull it back; the paper's rows back it up blind, never see j."""

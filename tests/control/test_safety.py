@@ -20,6 +20,7 @@ from fov_marl.control.safety import (
     blind_representatives,
     hold_band,
     neighbour_halfplanes,
+    particle_halfplane_offsets,
     risk_quantile,
     safety_rows,
     wall_clearances,
@@ -130,6 +131,77 @@ def test_blind_representatives_match_the_reference(seed, K, risk):
     rep_r, found_r = _blind_reference(p, mass, K, risk, 8.0)
     np.testing.assert_array_equal(found, found_r)
     np.testing.assert_allclose(rep, rep_r)
+
+
+def _offsets_reference(p, counts, n, risk):
+    """Slow reference: per (robot, neighbour) the (floor(δ P_j) + 1)-th smallest n·p."""
+    R, M = counts.shape
+    out = np.full((R, M), -np.inf)
+    for r in range(R):
+        start = 0
+        for j in range(M):
+            c = int(counts[r, j])
+            if c:
+                proj = sorted(float(n[r, j] @ q) for q in p[r, start : start + c])
+                out[r, j] = proj[min(int(math.floor(risk * c)), c - 1)]
+            start += c
+    return out
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.integers(1, 5), st.floats(0.001, 0.49))
+def test_particle_halfplane_offsets_match_the_reference(seed, M, risk):
+    rng = np.random.default_rng(seed)
+    R, P = 3, 40
+    counts = np.stack([rng.multinomial(P, np.ones(M) / M) for _ in range(R)])
+    p = rng.normal(0.0, 5.0, (R, P, 2))
+    ang = rng.uniform(-math.pi, math.pi, (R, M))
+    n = np.stack([np.cos(ang), np.sin(ang)], -1)
+    got = particle_halfplane_offsets(p, counts, n, risk)
+    np.testing.assert_allclose(got, _offsets_reference(p, counts, n, risk), rtol=0, atol=1e-12)
+    # the stated chance constraint on the particles: at most a fraction δ lies nearer
+    start = np.concatenate([np.zeros((R, 1), int), np.cumsum(counts, 1)[:, :-1]], 1)
+    for r in range(R):
+        for j in range(M):
+            c = counts[r, j]
+            if c:
+                proj = p[r, start[r, j] : start[r, j] + c] @ n[r, j]
+                assert np.mean(proj < got[r, j] - 1e-9) <= risk
+
+
+def test_undetected_rows_can_use_the_particles_own_quantile():
+    """A belief stretched along the line of sight: its Gaussian fit reaches the robot
+    (no row), its particles stay beyond 4 m (a row at their 1% quantile); detected
+    neighbours keep the Gaussian line."""
+    rng = np.random.default_rng(0)
+    far = np.column_stack([rng.uniform(4.0, 40.0, 200), rng.normal(0.0, 1.0, 200)])
+    near = np.array([[2.5, 0.0]]) + rng.normal(0.0, 0.1, (100, 2))
+    parts = np.concatenate([far, near])[None]
+    counts = np.array([[200, 100]])
+    mean = np.array([[far.mean(0), near.mean(0)]])
+    cov = np.array([[np.cov(far.T), np.cov(near.T)]])
+    det = np.array([[False, True]])
+    common = dict(
+        mean_body=mean,
+        cov_body=cov,
+        detected=det,
+        particles_body=parts,
+        particle_mass=np.zeros((1, 300)),
+        blind_bins=0,
+    )
+    gauss = _rows(**common)
+    pf = _rows(**common, particle_counts=counts, undetected_quantile="particles")
+    n, s = neighbour_halfplanes(mean, cov, risk_quantile(0.01))
+    assert s[0, 0] < 0.0  # the Gaussian band covers the robot: no row
+    assert gauss.kind[0, 0] == -1
+    s_pf = particle_halfplane_offsets(parts, counts, n, 0.01)[0, 0]
+    assert s_pf > 3.9
+    assert pf.kind[0, 0] == ROW_NEIGHBOUR
+    m_arc = arc_margin(CFG.v_max_mps, CFG.omega_max_radps, CFG.dt_s)
+    assert pf.h[0, 0] == pytest.approx(s_pf - CFG.safety_distance_m - m_arc)
+    np.testing.assert_array_equal(pf.b[0, 1], gauss.b[0, 1])  # detected: unchanged
+    with pytest.raises(ValueError, match="particle_counts"):
+        _rows(**common, undetected_quantile="particles")
 
 
 def test_wall_normals_point_out_of_the_arena_in_the_body_frame():
