@@ -26,9 +26,13 @@ key                         meaning
                             of normalised ``[vx, vy, ω]``)
 ``fallbacks``               robot-steps with ``infos[a]["safety/fallback"]``
 ``statuses``                robot-steps per filter ``status`` string
+``chatter_rate``            period-2 sign flips of the applied action components per robot-step
+                            (:func:`fov_marl.metrics.action_chatter`: ``+, −, +`` on three
+                            consecutive steps, all above 0.05 in action units); the filter's
+                            output when filtered, the adversary's action otherwise
 ==========================  ====================================================================
 
-The three filter columns are ``None`` for unfiltered cases. Every number is a
+The four filter columns are ``None`` for unfiltered cases. Every number is a
 deterministic function of the case and the seed: episode k of every case uses seed
 ``seed + k`` for the env and the filter (``env.reset(seed=seed + k)``), and child
 seeds of it (``SeedSequence([seed + k, 1])`` / ``[seed + k, 2]``) for the start poses
@@ -63,6 +67,7 @@ from fov_marl.adversaries import (
     make_start_poses,
 )
 from fov_marl.infos import metrics_of, safety_of
+from fov_marl.metrics import action_chatter
 
 __all__ = [
     "StressCase",
@@ -202,7 +207,8 @@ def run_stress_episode(
     Returns:
         ``{"seed", "steps", "robot_steps", "collisions", "first_collision_step",
         "violation_events", "violation_robot_steps", "min_distance_m", "intervened",
-        "action_change_sum", "fallbacks", "statuses"}`` (the filter entries are None
+        "action_change_sum", "fallbacks", "statuses", "chatter_events"}`` (the filter
+        entries are None
         when unfiltered; ``first_collision_step`` None when there was none).
     """
     case = StressCase.coerce(case)
@@ -217,9 +223,17 @@ def run_stress_episode(
     du_sum = 0.0
     first_collision = None
     statuses: dict[str, int] = {}
+    n = base.config.n_agents
+    applied: list[np.ndarray] = []  # (N, 3) per step, NaN for robots no longer live
     while env.agents:
-        obs, _, _, _, infos = env.step(adversary.act(obs))
+        actions = adversary.act(obs)
+        obs, _, _, _, infos = env.step(actions)
         n_steps += 1
+        step_u = np.full((n, 3), np.nan)
+        for a in infos:
+            u = safety_of(infos[a])["applied_action"] if case.filtered else actions[a]
+            step_u[base.agent_name_mapping[a]] = np.clip(np.asarray(u, np.float64), -1.0, 1.0)
+        applied.append(step_u)
         if on_step is not None:
             on_step()
         robot_steps += len(infos)
@@ -247,6 +261,7 @@ def run_stress_episode(
             for s in saf:
                 statuses[str(s["status"])] = statuses.get(str(s["status"]), 0) + 1
     env.close()
+    chatter = int(action_chatter(np.asarray(applied).reshape(-1, n, 3)).sum())
     return {
         "seed": int(seed),
         "steps": n_steps,
@@ -260,6 +275,7 @@ def run_stress_episode(
         "action_change_sum": du_sum if case.filtered else None,
         "fallbacks": fallbacks if case.filtered else None,
         "statuses": dict(sorted(statuses.items())) if case.filtered else None,
+        "chatter_events": chatter,
     }
 
 
@@ -293,6 +309,7 @@ def _aggregate(case: StressCase, eps: list[dict[str, Any]], steps: int) -> dict[
         "mean_action_change": None,
         "fallbacks": None,
         "statuses": None,
+        "chatter_rate": sum(e["chatter_events"] for e in eps) / max(rs, 1),
     }
     if case.filtered:
         row["intervention_rate"] = sum(e["intervened"] for e in eps) / max(rs, 1)
@@ -460,6 +477,7 @@ STRESS_COLUMNS: tuple[tuple[str, str], ...] = (
     ("interv", "intervention_rate"),
     ("mean_du", "mean_action_change"),
     ("fallback", "fallbacks"),
+    ("chatter", "chatter_rate"),
 )
 
 

@@ -93,9 +93,10 @@ def test_episode_matches_the_env_metrics_and_the_safety_infos():
     obs, _ = env.reset(seed=7)
     adv.reset(seed=0)  # charge_centre draws nothing: the policy seed does not matter
     interv = viol = 0
-    du = []
+    du, applied = [], []
     while env.agents:
         obs, _, _, _, infos = env.step(adv.act(obs))
+        applied.append([safety_of(infos[a])["applied_action"] for a in env.possible_agents])
         interv += sum(safety_of(i)["intervened"] for i in infos.values())
         du += [
             np.linalg.norm(
@@ -114,6 +115,20 @@ def test_episode_matches_the_env_metrics_and_the_safety_infos():
     assert rec["intervened"] == interv and rec["violation_robot_steps"] == viol
     assert rec["action_change_sum"] == pytest.approx(sum(du))
     assert rec["robot_steps"] == 90
+    # period-2 flips of the applied components, counted by hand
+    s = np.where(np.abs(np.asarray(applied)) > 0.05, np.sign(applied), 0.0)
+    flips = (s[1:-1] != 0) & (s[:-2] == -s[1:-1]) & (s[2:] == -s[1:-1])
+    assert rec["chatter_events"] == int(flips.sum())
+
+
+def test_chatter_rate_tells_alternating_from_steady_actions():
+    """The random adversary's own actions flip sign at random (unfiltered, per component
+    and step P = 0.95³ / 4 ≈ 0.21 of +,−,+ or −,+,−: ≈ 0.64 per robot-step over the
+    three components); "straight" never does."""
+    rnd = run_stress([StressCase("random", 2, 120.0, "random", False)], episodes=1, steps=200)
+    straight = run_stress([StressCase("straight", 2, 120.0, "random", False)], 1, 200)
+    assert 0.55 < rnd[0]["chatter_rate"] < 0.73, rnd[0]["chatter_rate"]
+    assert straight[0]["chatter_rate"] == 0.0
 
 
 def test_cases_validate_and_name_the_field():
