@@ -278,8 +278,16 @@ def _workers(args: argparse.Namespace) -> int:
 
 def _filter_kwargs(args: argparse.Namespace, loaded: Any | None) -> dict[str, Any] | None:
     """``--filter-tracker`` / ``--filter-controller`` (:mod:`fov_marl.filter_options`); a
-    model trained behind the filter runs behind it without ``--safety-filter``."""
-    on = bool(args.safety_filter or getattr(loaded, "safety_filter", False))
+    model trained behind the filter (a ``model.zip``, ``learned``, an exported folder) runs
+    behind it without ``--safety-filter``."""
+    from fov_marl.evaluation import learned_filter
+
+    trained = learned_filter(args.policy)
+    on = bool(
+        args.safety_filter
+        or getattr(loaded, "safety_filter", False)
+        or (trained is not None and trained[0])
+    )
     return filter_kwargs(args.filter_tracker, args.filter_controller, on)
 
 

@@ -358,6 +358,32 @@ def is_exported_policy(policy: Any) -> bool:
     )
 
 
+def learned_filter(policy: Any) -> tuple[bool, dict | None] | None:
+    """The filter a ``--policy`` value was trained behind: for ``"learned"`` (the shipped
+    model) and an exported folder, :func:`fov_marl.baselines.learned.trained_filter`;
+    None for anything else (registered scripted policies, ``model.zip`` paths, which
+    :func:`fov_marl.training.load_policy` reads)."""
+    from fov_marl.baselines.learned import trained_filter
+
+    if policy == "learned":
+        return trained_filter()
+    if is_exported_policy(policy):
+        return trained_filter(policy)
+    return None
+
+
+def _apply_learned_filter(job: dict[str, Any], policy: Any) -> dict[str, Any]:
+    """``job`` with the safety filter switched on when ``policy`` was trained behind it.
+
+    The filter keeps the job's options, by default the shipped filter's (the one the
+    stress sweeps validate; the measurements of the README use it), not the training
+    run's (the shipped model's used P_T = 500 for speed)."""
+    trained = learned_filter(policy)
+    if trained is None or not trained[0]:
+        return job
+    return {**job, "safety_filter": True}
+
+
 def episode_job(job: dict[str, Any], on_step: Callable[[Any, dict], None] | None = None) -> dict:
     """One episode from a picklable job, as its JSON-ready record (a backend task).
 
@@ -365,11 +391,13 @@ def episode_job(job: dict[str, Any], on_step: Callable[[Any, dict], None] | None
     the folder of an exported set policy (:func:`is_exported_policy`: the numpy
     ``learned`` policy with those weights, on the job's config) or the path of a trained
     model (loaded here, in the worker: its ``config.json`` fills the config fields the
-    job does not give, and its safety filter applies).
+    job does not give, and its safety filter applies). ``"learned"`` and an exported
+    folder trained behind the filter run behind it too (:func:`learned_filter`).
     ``on_step`` is forwarded to :func:`run_episode` (in-process progress).
     """
     job = dict(job)
     policy = job.pop("policy")
+    job = _apply_learned_filter(job, policy)
     if is_exported_policy(policy):  # numpy forward pass, any N, no torch
         rec = run_episode(policy="learned", policy_kwargs={"path": policy}, on_step=on_step, **job)
         rec.policy = str(policy)

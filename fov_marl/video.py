@@ -112,7 +112,9 @@ def render_episode(
         scenario: ``"coverage"`` or ``"crossing"``.
         policy: a registered policy name or the path of a trained ``model.zip`` (its
             config.json gives the config fields not in ``env_kwargs``, and its safety
-            filter).
+            filter); ``"learned"`` and an exported folder trained behind the filter run
+            behind it (:func:`fov_marl.evaluation.learned_filter`; the shipped
+            filter's options unless ``safety_filter_kwargs`` gives others).
         seed: the episode's seed.
         out: output file; its writer is checked before the episode runs.
         safety_filter: run behind :class:`~fov_marl.wrappers.SafetyFilterWrapper`.
@@ -146,9 +148,12 @@ def render_episode(
         label = f"{loaded.name} ({label})"
     else:
         from fov_marl.baselines import make_policy
-        from fov_marl.evaluation import is_exported_policy
+        from fov_marl.evaluation import is_exported_policy, learned_filter
 
         kw = {"path": policy} if is_exported_policy(policy) else {}
+        trained = learned_filter(policy)
+        if trained is not None and trained[0]:  # trained behind the filter: run behind it
+            safety_filter = True
 
         def factory_base(env: Any) -> Any:
             return make_policy("learned" if kw else policy, env, **kw)

@@ -9,9 +9,12 @@ of ``N − 1`` neighbour entries and its own cue; the entries go through one sha
 effect), and the pooled vectors, the count of detections and the encoded cue feed the
 action head. Permuting the neighbour slots leaves the action unchanged.
 
-The shipped model was trained behind :class:`~fov_marl.wrappers.SafetyFilterWrapper`.
-Run it behind the filter (``fov-marl evaluate --policy learned --safety-filter``): alone,
-it collides. Measured without the filter, N = 6, 20 seeds: collisions in every episode.
+The shipped model was trained behind :class:`~fov_marl.wrappers.SafetyFilterWrapper`,
+and ``fov-marl evaluate --policy learned`` / ``render`` run it behind the filter
+(:func:`trained_filter`; so do an exported folder and a ``model.zip`` trained behind
+the filter). In Python, wrap the env yourself
+(``SafetyFilterWrapper(env)``, or ``run_episode(..., safety_filter=True)``): alone, it
+collides. Measured without the filter, N = 6, 20 seeds: collisions in every episode.
 With it: 0 collisions, and final η about pfcbf's (README, "Learned policy").
 
 >>> from fov_marl.baselines import make_policy
@@ -85,6 +88,7 @@ __all__ = [
     "neighbour_features",
     "cue_features",
     "shipped_model_dir",
+    "trained_filter",
 ]
 
 MODEL_FORMAT = "fov_marl.set_policy/1"
@@ -97,6 +101,29 @@ CUE_FEATURES = 8
 def shipped_model_dir() -> Path:
     """The folder of the shipped pretrained model (``fov_marl/models/learned_coverage``)."""
     return Path(str(resources.files("fov_marl").joinpath("models", SHIPPED_MODEL)))
+
+
+def trained_filter(path: str | os.PathLike | None = None) -> tuple[bool, dict | None]:
+    """``(safety_filter, safety_filter_kwargs)`` a model folder was trained with.
+
+    Read from its ``config.json`` ``training`` entry (:func:`fov_marl.training.export_policy`
+    stores the training config there); ``(False, None)`` when it records none. The CLI
+    (``fov-marl evaluate`` / ``render``) runs such a model behind its filter, as it does
+    a trained ``model.zip``.
+
+    Args:
+        path: a model folder; default the shipped model.
+    """
+    d = Path(path) if path is not None else shipped_model_dir()
+    try:
+        config = json.loads((d / "config.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False, None
+    training = config.get("training") if isinstance(config, dict) else None
+    if not isinstance(training, dict) or not training.get("safety_filter"):
+        return False, None
+    kw = training.get("safety_filter_kwargs")
+    return True, dict(kw) if isinstance(kw, dict) and kw else None
 
 
 def n_slots_of(obs_dim: int, extra_per_slot: int = 0) -> int:

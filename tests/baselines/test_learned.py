@@ -11,7 +11,12 @@ import numpy as np
 import pytest
 
 from fov_marl.baselines import available_policies, make_policy
-from fov_marl.baselines.learned import MODEL_FORMAT, SetActorWeights, shipped_model_dir
+from fov_marl.baselines.learned import (
+    MODEL_FORMAT,
+    SetActorWeights,
+    shipped_model_dir,
+    trained_filter,
+)
 from fov_marl.envs import fov_coverage_v0
 from fov_marl.evaluation import run_episode
 
@@ -82,3 +87,24 @@ def test_cli_evaluate_policy_learned(tmp_path, capsys):
     assert main(args) == 0
     res = json.loads((tmp_path / "results.json").read_text())
     assert res["episodes"][0]["policy"] == "learned" and res["episodes"][0]["n_agents"] == 5
+    # trained behind the filter, it runs behind it without --safety-filter (alone it collides)
+    assert res["episodes"][0]["safety_filter"] is True
+    assert res["episodes"][0]["intervention_rate"] is not None
+
+
+def test_trained_filter_reads_the_models_training_config(tmp_path):
+    on, kw = trained_filter()  # the shipped model: trained behind the filter, P_T = 500
+    assert on is True and kw == {"tracker_params": {"n_particles_total": 500}}
+    d = tmp_path / "m"
+    shutil.copytree(shipped_model_dir(), d)
+    cfg = json.loads((d / "config.json").read_text())
+    cfg["training"]["safety_filter"] = False
+    (d / "config.json").write_text(json.dumps(cfg))
+    assert trained_filter(d) == (False, None)
+    del cfg["training"]
+    (d / "config.json").write_text(json.dumps(cfg))
+    assert trained_filter(d) == (False, None)
+    from fov_marl.evaluation import episode_job
+
+    rec = episode_job(dict(policy=str(d), scenario="coverage", seed=0, n_agents=3, max_steps=5))
+    assert rec["safety_filter"] is False  # an export trained without it runs as asked
