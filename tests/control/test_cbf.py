@@ -418,6 +418,9 @@ def test_row_authority_closed_form():
         ("lost_sigma_max_m", float("nan")),
         ("lost_fov_age_s", -1.0),
         ("lost_fov_yield", 1),
+        ("priority_hysteresis_m", -0.1),
+        ("priority_hysteresis_m", float("nan")),
+        ("undetected_quantile", "median"),
     ],
 )
 def test_controller_params_validation_names_field(field, value):
