@@ -110,7 +110,13 @@ def test_filter_wait_charge_regression_collides_with_yield_and_sigma_cut():
 
     # on the filter it was found with (1 m blind travel budget; with the shipped 0.5 m this
     # episode keeps clear even with both ablations on)
-    cp = {"lost_fov_yield": True, "lost_sigma_max_m": 2.0, "blind_travel_m": 1.0}
+    # (and before the FoV lead's hysteresis)
+    cp = {
+        "lost_fov_yield": True,
+        "lost_sigma_max_m": 2.0,
+        "blind_travel_m": 1.0,
+        "priority_hysteresis_m": 0.0,
+    }
     case = StressCase("wait_charge", 12, 120.0, "random", filter_kwargs={"controller_params": cp})
     assert run_stress_episode(case, 101, 300)["collisions"] > 0
 
@@ -131,7 +137,7 @@ def test_filter_narrow_view_edge_regression():
 def test_filter_narrow_view_edge_regression_collides_with_a_1m_budget():
     from fov_marl.stress import StressCase, run_stress_episode
 
-    cp = {"blind_travel_m": 1.0}
+    cp = {"blind_travel_m": 1.0, "priority_hysteresis_m": 0.0}  # the filter it was found on
     case = StressCase(
         "wait_charge", 24, 45.0, "head_on_pair", filter_kwargs={"controller_params": cp}
     )
@@ -231,7 +237,10 @@ def test_crossing_seed_7_stalls_without_lost_fov_yield():
 @pytest.mark.parametrize(
     "episode, off",
     [
-        (1, {"blind_travel_m": 0.0}),
+        # every counterfactual runs on the filter the collision was found with: before the
+        # FoV lead's hysteresis (priority_hysteresis_m = 0), which sends these episodes on
+        # other courses that stay clear even without the rows
+        (1, {"blind_travel_m": 0.0, "priority_hysteresis_m": 0.0}),
         # lost_fov_yield and lost_sigma_max_m = 2 (both off in the shipped filter) send
         # this episode on another course; keep them off so the course is the one the
         # rows were built for
@@ -242,6 +251,7 @@ def test_crossing_seed_7_stalls_without_lost_fov_yield():
                 "blind_travel_m": 0.0,
                 "lost_sigma_max_m": math.inf,
                 "lost_fov_yield": False,
+                "priority_hysteresis_m": 0.0,
             },
         ),
     ],
