@@ -282,11 +282,8 @@ def _filter_kwargs(args: argparse.Namespace, loaded: Any | None) -> dict[str, An
     behind it without ``--safety-filter``."""
     from fov_marl.evaluation import learned_filter
 
-    trained = learned_filter(args.policy)
     on = bool(
-        args.safety_filter
-        or getattr(loaded, "safety_filter", False)
-        or (trained is not None and trained[0])
+        args.safety_filter or getattr(loaded, "safety_filter", False) or learned_filter(args.policy)
     )
     return filter_kwargs(args.filter_tracker, args.filter_controller, on)
 

@@ -358,18 +358,17 @@ def is_exported_policy(policy: Any) -> bool:
     )
 
 
-def learned_filter(policy: Any) -> tuple[bool, dict | None] | None:
-    """The filter a ``--policy`` value was trained behind: for ``"learned"`` (the shipped
-    model) and an exported folder, :func:`fov_marl.baselines.learned.trained_filter`;
-    None for anything else (registered scripted policies, ``model.zip`` paths, which
-    :func:`fov_marl.training.load_policy` reads)."""
+def learned_filter(policy: Any) -> bool:
+    """True when a ``--policy`` value is ``"learned"`` (the shipped model) or an exported
+    folder that was trained behind the safety filter
+    (:func:`fov_marl.baselines.learned.trained_filter`); False for anything else
+    (scripted policies; ``model.zip`` paths, which :func:`fov_marl.training.load_policy`
+    reads)."""
     from fov_marl.baselines.learned import trained_filter
 
     if policy == "learned":
-        return trained_filter()
-    if is_exported_policy(policy):
-        return trained_filter(policy)
-    return None
+        return trained_filter()[0]
+    return is_exported_policy(policy) and trained_filter(policy)[0]
 
 
 def _apply_learned_filter(job: dict[str, Any], policy: Any) -> dict[str, Any]:
@@ -378,10 +377,7 @@ def _apply_learned_filter(job: dict[str, Any], policy: Any) -> dict[str, Any]:
     The filter keeps the job's options, by default the shipped filter's (the one the
     stress sweeps validate; the measurements of the README use it), not the training
     run's (the shipped model's used P_T = 500 for speed)."""
-    trained = learned_filter(policy)
-    if trained is None or not trained[0]:
-        return job
-    return {**job, "safety_filter": True}
+    return {**job, "safety_filter": True} if learned_filter(policy) else job
 
 
 def episode_job(job: dict[str, Any], on_step: Callable[[Any, dict], None] | None = None) -> dict:

@@ -208,8 +208,8 @@ def run_stress_episode(
         ``{"seed", "steps", "robot_steps", "collisions", "first_collision_step",
         "violation_events", "violation_robot_steps", "min_distance_m", "intervened",
         "action_change_sum", "fallbacks", "statuses", "chatter_events"}`` (the filter
-        entries are None
-        when unfiltered; ``first_collision_step`` None when there was none).
+        entries are None when unfiltered; ``first_collision_step`` None when there was
+        none).
     """
     case = StressCase.coerce(case)
     env = _make_env(case, seed, steps)
@@ -229,9 +229,10 @@ def run_stress_episode(
         actions = adversary.act(obs)
         obs, _, _, _, infos = env.step(actions)
         n_steps += 1
+        saf = [safety_of(infos[a]) for a in infos] if case.filtered else []
         step_u = np.full((n, 3), np.nan)
-        for a in infos:
-            u = safety_of(infos[a])["applied_action"] if case.filtered else actions[a]
+        for k, a in enumerate(infos):
+            u = saf[k]["applied_action"] if case.filtered else actions[a]
             step_u[base.agent_name_mapping[a]] = np.clip(np.asarray(u, np.float64), -1.0, 1.0)
         applied.append(step_u)
         if on_step is not None:
@@ -247,7 +248,6 @@ def run_stress_episode(
             live = np.array([base.agent_name_mapping[a] for a in infos], dtype=np.int64)
             viol_rs += int(np.sum(d[live].min(axis=1) < d_s))
         if case.filtered:
-            saf = [safety_of(infos[a]) for a in infos]
             intervened += sum(bool(s["intervened"]) for s in saf)
             fallbacks += sum(bool(s["fallback"]) for s in saf)
             du = np.array(

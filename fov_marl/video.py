@@ -151,9 +151,7 @@ def render_episode(
         from fov_marl.evaluation import is_exported_policy, learned_filter
 
         kw = {"path": policy} if is_exported_policy(policy) else {}
-        trained = learned_filter(policy)
-        if trained is not None and trained[0]:  # trained behind the filter: run behind it
-            safety_filter = True
+        safety_filter = safety_filter or learned_filter(policy)  # trained behind it
 
         def factory_base(env: Any) -> Any:
             return make_policy("learned" if kw else policy, env, **kw)
