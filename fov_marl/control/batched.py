@@ -34,9 +34,9 @@ from fov_marl.control.cbf import (
     normalise_rows,
     row_h_max,
 )
-from fov_marl.control.controller import ControlResult, FovCbfController
+from fov_marl.control.controller import FALLBACK_TIE_MPS, ControlResult, FovCbfController
 from fov_marl.control.params import ControllerParams
-from fov_marl.control.safety import SafetyRows, team_safety_rows
+from fov_marl.control.safety import ROW_CONE, ROW_WALL, SafetyRows, team_safety_rows
 
 __all__ = ["BatchControlResult", "BatchedFovCbfController", "CONTROL_STATUSES"]
 
@@ -557,15 +557,16 @@ class BatchedFovCbfController:
         okm = np.where(keep, val >= np.minimum(b, 0.0) - tol, True).all(axis=1) & has
         out = np.zeros((u_qp.shape[0], 3))
         out[okm] = uq[okm]
-        nw = keep & (kind != 2)
+        nw = keep & (kind != ROW_WALL) & (kind != ROW_CONE)
         anyw = nw.any(axis=1) & ~okm
         if anyw.any():
             bb = np.where(nw, b, np.inf)
-            k = np.argmin(bb, axis=1)
+            phi = np.arctan2(-A[..., 1], -A[..., 0])
+            near = nw & (bb <= bb.min(axis=1, keepdims=True) + FALLBACK_TIE_MPS)
+            k = np.argmin(np.where(near, np.abs(phi), np.inf), axis=1)
             ri = np.arange(u_qp.shape[0])
-            phi = np.arctan2(-A[ri, k, 1], -A[ri, k, 0])
             gain = self.params.look_gain if self.params.look_gain > 0 else 3.0
-            om = np.clip(gain * phi, -cfg.omega_max_radps, cfg.omega_max_radps)
+            om = np.clip(gain * phi[ri, k], -cfg.omega_max_radps, cfg.omega_max_radps)
             out[anyw, 2] = om[anyw]
         return out
 

@@ -85,13 +85,16 @@ from fov_marl.control.cbf import (
 )
 from fov_marl.control.params import ControllerParams
 from fov_marl.control.qp import HierarchicalQP
-from fov_marl.control.safety import team_safety_rows
+from fov_marl.control.safety import ROW_CONE, ROW_WALL, team_safety_rows
 
 __all__ = ["ControlResult", "FovCbfController"]
 
 _FOV_ROWS = np.array([True, True, False, True])
 #: κ* (normalised) above which the collision rows count as not met: the safe fallback
 _KAPPA_SAFETY = 1e-3
+#: rows whose ``b̃`` lies within this (m/s) of the smallest tie as the safe
+#: fallback's turn target (:meth:`FovCbfController._safe_fallback`)
+FALLBACK_TIE_MPS = 0.25
 
 
 @dataclass
@@ -429,19 +432,25 @@ class FovCbfController:
         (its own motion then shortens no distance, and with shared responsibility the
         other robot of each pair keeps its share) and turns towards the most dangerous
         row that is not a wall (smallest ``b̃``) at ``look_gain`` times its bearing, so
-        that the camera confirms or clears it.
+        that the camera confirms or clears it. Rows within :data:`FALLBACK_TIE_MPS` of
+        the smallest ``b̃`` tie, and the one nearest the camera's axis wins: turning
+        towards it keeps it the target (measured: with the plain argmin, robots packed
+        along a wall between two neighbours turned back and forth step after step as
+        the two swapped on the estimate's noise). The bearing cone's rows
+        (``ROW_CONE``) are not targets: their directions lie ``α`` off the line of sight.
         """
         tol = 1e-6
         if u_qp is not None and np.all(A @ u_qp + b >= np.minimum(b, 0.0) - tol):
             return u_qp
         cfg = self.config
         out = np.zeros(3)
-        nw = np.flatnonzero(kind != 2)
+        nw = np.flatnonzero((kind != ROW_WALL) & (kind != ROW_CONE))
         if nw.size:
-            k = nw[np.argmin(b[nw])]
-            phi = math.atan2(-A[k, 1], -A[k, 0])
+            phi = np.arctan2(-A[nw, 1], -A[nw, 0])
+            near = b[nw] <= b[nw].min() + FALLBACK_TIE_MPS
+            k = np.argmin(np.where(near, np.abs(phi), np.inf))
             gain = self.params.look_gain if self.params.look_gain > 0 else 3.0
-            out[2] = min(max(gain * phi, -cfg.omega_max_radps), cfg.omega_max_radps)
+            out[2] = min(max(gain * float(phi[k]), -cfg.omega_max_radps), cfg.omega_max_radps)
         return out
 
     def solve(

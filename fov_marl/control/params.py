@@ -122,6 +122,14 @@ field                        default   source / reason
                                        filter, N = 6, 5 x 500 steps) 78% of robot-steps
                                        changed against 81% at β = 120°; 2 x 300 steps at
                                        360°: 17% and 15% against 18% and 34%
+``bearing_cone_max_deg``     45.0      cap on the half-angle α of the cone of bearings
+                                       a neighbour within D_s may lie at: its row gets
+                                       two more along the cone's edges (:mod:`~fov_marl.
+                                       control.safety` Section 1b), so a robot inside
+                                       D_s does not move across an uncertain line of
+                                       sight; 0 disables. Measured: without it a packed
+                                       robot in the safe fallback closed from 1.043 m
+                                       to 1.015 m (contact 1.0) in one step
 ``lost_fov_yield``           True      the FoV levels of neighbours the camera does not
                                        report yield when they stall the robot
                                        (:meth:`~fov_marl.control.controller.
@@ -285,6 +293,8 @@ class ControllerParams:
             line of sight (m) get no neighbour row.
         undetected_quantile: ``"gaussian"`` or ``"particles"``, the lines of undetected
             neighbours (:func:`~fov_marl.control.safety.safety_rows`).
+        bearing_cone_max_deg: cap in [0, 80] (degrees) on the bearing cone of the
+            neighbour rows within D_s; 0 disables.
         lost_fov_yield: when the robot is stalled (less than a fifth of u*'s
             translation kept), solve again without the FoV rows of undetected
             neighbours and use that solution if it is much closer to u*.
@@ -349,6 +359,7 @@ class ControllerParams:
     blind_travel_memory_s: float = 30.0
     lost_sigma_max_m: float = math.inf
     undetected_quantile: str = "gaussian"
+    bearing_cone_max_deg: float = 45.0
     walls: bool = True
     wall_gain: float = 2.5
     deadlock_turn_deg: float = 60.0
@@ -433,6 +444,7 @@ class ControllerParams:
         _check("last_seen_radius_m", self.last_seen_radius_m, 0.0, 100.0)
         _check("last_seen_max_age_s", self.last_seen_max_age_s, 0.0, 1e6, lo_open=True)
         _check("blind_travel_m", self.blind_travel_m, 0.0, 100.0)
+        _check("bearing_cone_max_deg", self.bearing_cone_max_deg, 0.0, 80.0)
         if self.lost_sigma_max_m != math.inf:  # inf (the default) turns it off
             check_real(
                 "lost_sigma_max_m", self.lost_sigma_max_m, 0.0, 1e6, lo_open=True, note="or inf"

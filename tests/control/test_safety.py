@@ -14,9 +14,11 @@ from fov_marl.config import make_config
 from fov_marl.control import ControllerParams, FovCbfController
 from fov_marl.control.safety import (
     ROW_BLIND,
+    ROW_CONE,
     ROW_NEIGHBOUR,
     ROW_WALL,
     arc_margin,
+    bearing_cone,
     blind_representatives,
     hold_band,
     neighbour_halfplanes,
@@ -523,3 +525,100 @@ def test_blind_travel_row_stops_travel_along_the_budget_only():
     row = np.flatnonzero(np.abs(A[:, 1] + 1.0) < 1e-12)
     np.testing.assert_allclose(b[row[0]], 0.1 / CFG.dt_s)
     assert _rows(blind_travel_body=np.zeros((1, 2)), blind_travel_m=1.0).robot(0)[0].shape[0] == 0
+
+
+# ------------------------------------------------------------- the bearing cone (1b)
+def _spd(rng, scale):
+    L = rng.normal(size=(2, 2)) * scale
+    return L @ L.T + 1e-4 * np.eye(2)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.floats(0.05, 8.0), st.floats(-1.0, 1.0))
+def test_bearing_cone_matches_the_reference(seed, r, h):
+    """``sin α = min(1, z σ_t / ‖μ‖)`` with σ_t across the line of sight, from a rotation."""
+    rng = np.random.default_rng(seed)
+    phi = rng.uniform(-math.pi, math.pi)
+    mu = r * np.array([math.cos(phi), math.sin(phi)])
+    S = _spd(rng, rng.uniform(0.01, 1.0))
+    z = risk_quantile(0.01)
+    sin_a, inside = bearing_cone(mu[None, None], S[None, None], np.array([[h]]), z)
+    rot90 = np.array([[0.0, -1.0], [1.0, 0.0]])
+    t = rot90 @ (mu / np.linalg.norm(mu))
+    ref = min(1.0, z * math.sqrt(t @ S @ t) / np.linalg.norm(mu))
+    assert sin_a[0, 0] == pytest.approx(ref, rel=1e-9, abs=1e-12)
+    assert bool(inside[0, 0]) == (h < 0.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000), st.floats(1.05, 3.5), st.booleans())
+def test_inside_ds_no_allowed_step_approaches_any_bearing_of_the_cone(seed, r, det):
+    """Within D_s (h < 0, the row holds or retreats) every velocity a detected neighbour's
+    rows allow has ``p · v ≤ 0`` for each direction p of the cone: a straight step shortens
+    the distance to no bearing the neighbour may lie at. Beyond D_s, and for undetected
+    neighbours, there are no cone rows."""
+    rng = np.random.default_rng(seed)
+    phi = rng.uniform(-math.pi, math.pi)
+    n = np.array([math.cos(phi), math.sin(phi)])
+    S = _spd(rng, rng.uniform(0.05, 0.4))
+    cap = math.radians(45.0)
+    rows = _rows(
+        mean_body=(r * n)[None, None],
+        cov_body=S[None, None],
+        detected=np.array([[det]]),
+        walls=False,
+        blind_bins=0,
+        bearing_cone_max_rad=cap,
+    )
+    keep = rows.kind[0] >= 0
+    A, b, kind, h = rows.A[0][keep], rows.b[0][keep], rows.kind[0][keep], rows.h[0][keep]
+    if not det or not np.any(kind == ROW_NEIGHBOUR) or h.min() >= 0.0:
+        assert not np.any(kind == ROW_CONE)  # undetected or beyond D_s: none
+        return
+    assert np.sum(kind == ROW_CONE) == 2
+    sin_a, _ = bearing_cone((r * n)[None, None], S[None, None], h[:1][None], risk_quantile(0.01))
+    alpha = math.asin(min(float(sin_a[0, 0]), math.sin(cap)))
+    v = rng.uniform(-1.0, 1.0, size=(4000, 2))
+    u = np.concatenate([v, np.zeros((4000, 1))], 1)
+    ok = (u @ A.T + b >= 0.0).all(axis=1)
+    psi = phi + np.linspace(-alpha, alpha, 41)
+    p = np.stack([np.cos(psi), np.sin(psi)], 1)
+    if b.max() <= 0.0:
+        assert (v[ok] @ p.T).max(initial=-np.inf) <= 1e-9
+    # and the cone costs nothing the plain row allows when moving straight away
+    away = -np.linalg.norm(b[kind == ROW_NEIGHBOUR]) / math.cos(alpha) * n - 1e-9 * n
+    assert (A[:, :2] @ away + b >= -1e-9).all()
+
+
+def _fallback_turn(A_xy, b, kind):
+    from fov_marl.control.batched import BatchedFovCbfController
+
+    A = np.concatenate([np.asarray(A_xy, float), np.zeros((len(b), 1))], 1)
+    b, kind = np.asarray(b, float), np.asarray(kind, np.int8)
+    one = FovCbfController(CFG, ControllerParams())._safe_fallback(None, A, b, kind)
+    batch = BatchedFovCbfController(CFG, ControllerParams())._safe_fallback(
+        np.full((1, 3), np.nan), A[None], b[None], kind[None], np.ones((1, len(b)), bool)
+    )
+    np.testing.assert_allclose(batch[0], one, atol=1e-12)
+    assert one[:2].tolist() == [0.0, 0.0]
+    return one[2]
+
+
+def _row_at(deg):  # A of a row "do not approach bearing deg": [-n_x, -n_y]
+    return [-math.cos(math.radians(deg)), -math.sin(math.radians(deg))]
+
+
+def test_safe_fallback_turns_to_the_most_dangerous_row_nearest_the_camera_axis():
+    """Two neighbours on opposite sides with nearly equal b̃: the one nearer the camera's
+    axis is the target (turning keeps it so: no back-and-forth); a clearly more dangerous
+    one wins whatever its bearing; wall and bearing-cone rows are never targets."""
+    near_tie = _fallback_turn([_row_at(100.0), _row_at(-20.0)], [-0.50, -0.45], [0, 0])
+    assert near_tie < 0.0  # towards -20°
+    clear = _fallback_turn([_row_at(100.0), _row_at(-20.0)], [-1.0, -0.2], [0, 0])
+    assert clear > 0.0  # towards +100°
+    skip = _fallback_turn(
+        [_row_at(60.0), _row_at(-150.0), _row_at(-30.0)],
+        [-2.0, -3.0, -0.5],
+        [ROW_CONE, ROW_WALL, ROW_NEIGHBOUR],
+    )
+    assert skip < 0.0  # towards -30°, the only neighbour row
