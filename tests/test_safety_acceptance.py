@@ -124,17 +124,27 @@ def test_filter_wait_charge_regression_collides_with_yield_and_sigma_cut():
 def test_filter_packed_wall_start_spinning_regression():
     """spin_charge, N = 8, β = 360°, packed 1.1 m apart along a wall, seed 900: two robots in
     the safe fallback kept their QP's escape across each other's uncertain line of sight
-    and closed from 1.043 m to 1.015 m (contact at 1.0) in step 20. With the bearing cone
-    of the rows within D_s (``safety`` Section 1b) no pair gets closer than it started;
-    without it the same episode dips below its start."""
+    while turning at ω_max and closed from 1.043 m to 1.015 m (contact at 1.0) in step 20.
+    With the bearing cone of the rows within D_s (``safety`` Section 1b) and the
+    fallback's straight steps no pair gets closer than it started."""
     from fov_marl.stress import StressCase, run_stress_episode
 
     ep = run_stress_episode(StressCase("spin_charge", 8, 360.0, "wall"), 900, 60)
     assert ep["collisions"] == 0, ep
     assert ep["min_distance_m"] >= 1.1 - 1e-6, ep
+
+
+@pytest.mark.slow
+def test_filter_packed_wall_start_dips_without_the_bearing_cone():
+    """spin_charge, N = 12, β = 360°, wall start, seed 1001: no pair closer than its 1.1 m
+    start with the bearing cone; 1.0957 m without it (straight fallback steps alone)."""
+    from fov_marl.stress import StressCase, run_stress_episode
+
+    ep = run_stress_episode(StressCase("spin_charge", 12, 360.0, "wall"), 1001, 300)
+    assert ep["min_distance_m"] >= 1.1 - 1e-6, ep
     cp = {"bearing_cone_max_deg": 0.0}
-    off = StressCase("spin_charge", 8, 360.0, "wall", filter_kwargs={"controller_params": cp})
-    assert run_stress_episode(off, 900, 60)["min_distance_m"] < 1.095
+    off = StressCase("spin_charge", 12, 360.0, "wall", filter_kwargs={"controller_params": cp})
+    assert run_stress_episode(off, 1001, 300)["min_distance_m"] < 1.099
 
 
 def test_filter_narrow_view_edge_regression():

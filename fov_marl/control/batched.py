@@ -557,6 +557,8 @@ class BatchedFovCbfController:
         okm = np.where(keep, val >= np.minimum(b, 0.0) - tol, True).all(axis=1) & has
         out = np.zeros((u_qp.shape[0], 3))
         out[okm] = uq[okm]
+        held = okm & (keep & (b <= tol)).any(axis=1)  # a straight step, no arc
+        out[held, 2] = 0.0
         nw = keep & (kind != ROW_WALL) & (kind != ROW_CONE)
         anyw = nw.any(axis=1) & ~okm
         if anyw.any():

@@ -105,8 +105,12 @@ every ``p`` in the cone, so a straight step shortens no distance to it. Beyond D
 are none, nor for undetected neighbours: a diffuse belief's cone is wide (α at the cap)
 and would pin the robot to the retreat directions whenever a band reaches within D_s
 (measured: a settled pfcbf team at 120° turned back and forth again), while its row
-``n · v ≤ 0`` is already a bound on the distance to the whole half-plane. With them that episode's minimum is the start's 1.1 m (0 collisions, the
-quick sweep's minima unchanged).
+``n · v ≤ 0`` is already a bound on the distance to the whole half-plane. With them, and with the safe fallback's kept steps made straight
+(:meth:`~fov_marl.control.controller.FovCbfController._safe_fallback`: an arc at ω_max
+curved a robot escaping across its neighbour's line from 1.1 m to 1.089 m), that
+episode's minimum is the start's 1.1 m. Measured over packed starts (wall, corner,
+clustered, head-on pairs; N 2-12; β 45/120/360°; all nine adversaries; 2 episodes each,
+864 episodes): 0 collisions; the worst pair came 1.1 mm closer than its start.
 
 2. Blind rows: a speed bound per direction from the particles (Eq. 4)
 ====================================================================

@@ -622,3 +622,22 @@ def test_safe_fallback_turns_to_the_most_dangerous_row_nearest_the_camera_axis()
         [ROW_CONE, ROW_WALL, ROW_NEIGHBOUR],
     )
     assert skip < 0.0  # towards -30°, the only neighbour row
+
+
+def test_safe_fallback_keeps_a_retreat_as_a_straight_step():
+    """The QP's input is kept when it makes no row worse than standing still; while a row
+    holds or retreats (b̃ ≤ 0) its yaw rate is dropped (an arc would curve into the
+    neighbour), and it is kept when every row allows motion."""
+    from fov_marl.control.batched import BatchedFovCbfController
+
+    A = np.array([[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # neighbours ahead and to the left
+    u_qp = np.array([-0.3, -0.5, 1.2])
+    for b, w in (([-0.2, 0.0], 0.0), ([0.4, 0.6], 1.2)):
+        b = np.array(b)
+        kind = np.array([ROW_NEIGHBOUR, ROW_NEIGHBOUR], np.int8)
+        one = FovCbfController(CFG, ControllerParams())._safe_fallback(u_qp, A, b, kind)
+        np.testing.assert_array_equal(one, [-0.3, -0.5, w])
+        batch = BatchedFovCbfController(CFG, ControllerParams())._safe_fallback(
+            u_qp[None], A[None], b[None], kind[None], np.ones((1, 2), bool)
+        )
+        np.testing.assert_array_equal(batch[0], one)
