@@ -34,9 +34,9 @@ from fov_marl.control.cbf import (
     normalise_rows,
     row_h_max,
 )
-from fov_marl.control.controller import FALLBACK_TIE_MPS, ControlResult, FovCbfController
+from fov_marl.control.controller import ControlResult, FovCbfController, safe_fallback_inputs
 from fov_marl.control.params import ControllerParams
-from fov_marl.control.safety import ROW_CONE, ROW_WALL, SafetyRows, team_safety_rows
+from fov_marl.control.safety import SafetyRows, team_safety_rows
 
 __all__ = ["BatchControlResult", "BatchedFovCbfController", "CONTROL_STATUSES"]
 
@@ -549,28 +549,10 @@ class BatchedFovCbfController:
 
     def _safe_fallback(self, u_qp, A, b, kind, keep) -> np.ndarray:
         """:meth:`FovCbfController._safe_fallback` for ``(F,)`` robots (u_qp NaN rows: None)."""
-        cfg = self.config
-        tol = 1e-6
-        has = np.isfinite(u_qp).all(axis=1)
-        uq = np.where(has[:, None], u_qp, 0.0)
-        val = np.einsum("rkn,rn->rk", A, uq) + b
-        okm = np.where(keep, val >= np.minimum(b, 0.0) - tol, True).all(axis=1) & has
-        out = np.zeros((u_qp.shape[0], 3))
-        out[okm] = uq[okm]
-        held = okm & (keep & (b <= tol)).any(axis=1)  # a straight step, no arc
-        out[held, 2] = 0.0
-        nw = keep & (kind != ROW_WALL) & (kind != ROW_CONE)
-        anyw = nw.any(axis=1) & ~okm
-        if anyw.any():
-            bb = np.where(nw, b, np.inf)
-            phi = np.arctan2(-A[..., 1], -A[..., 0])
-            near = nw & (bb <= bb.min(axis=1, keepdims=True) + FALLBACK_TIE_MPS)
-            k = np.argmin(np.where(near, np.abs(phi), np.inf), axis=1)
-            ri = np.arange(u_qp.shape[0])
-            gain = self.params.look_gain if self.params.look_gain > 0 else 3.0
-            om = np.clip(gain * phi[ri, k], -cfg.omega_max_radps, cfg.omega_max_radps)
-            out[anyw, 2] = om[anyw]
-        return out
+        p = self.params
+        return safe_fallback_inputs(
+            u_qp, A, b, kind, keep, p.look_gain, self.config.omega_max_radps
+        )
 
     def _solve_loop(self, u_star, p_body, v_est, d, ids, safety, detected, t0, fov_yield=None):
         """One per-robot controller per robot (the osqp backend)."""

@@ -87,7 +87,7 @@ from fov_marl.control.params import ControllerParams
 from fov_marl.control.qp import HierarchicalQP
 from fov_marl.control.safety import ROW_CONE, ROW_WALL, team_safety_rows
 
-__all__ = ["ControlResult", "FovCbfController"]
+__all__ = ["ControlResult", "FovCbfController", "safe_fallback_inputs"]
 
 _FOV_ROWS = np.array([True, True, False, True])
 #: κ* (normalised) above which the collision rows count as not met: the safe fallback
@@ -95,6 +95,48 @@ _KAPPA_SAFETY = 1e-3
 #: rows whose ``b̃`` lies within this (m/s) of the smallest tie as the safe
 #: fallback's turn target (:meth:`FovCbfController._safe_fallback`)
 FALLBACK_TIE_MPS = 0.25
+
+
+def safe_fallback_inputs(
+    u_qp: np.ndarray,
+    A: np.ndarray,
+    b: np.ndarray,
+    kind: np.ndarray,
+    keep: np.ndarray,
+    look_gain: float,
+    omega_max_radps: float,
+) -> np.ndarray:
+    """The safe fallback of :meth:`FovCbfController._safe_fallback` for ``F`` robots.
+
+    Args:
+        u_qp: ``(F, 3)`` the QPs' least-violation inputs (a NaN row: none).
+        A, b, kind: ``(F, K, 3)``, ``(F, K)``, ``(F, K)`` the normalised collision rows.
+        keep: ``(F, K)`` bool, the rows that exist (False: padding).
+        look_gain: the turn gain (≤ 0: 3). omega_max_radps: the yaw-rate bound.
+
+    Returns:
+        ``(F, 3)`` body-frame inputs ``[vx, vy, ω]``.
+    """
+    tol = 1e-6
+    has = np.isfinite(u_qp).all(axis=1)
+    uq = np.where(has[:, None], u_qp, 0.0)
+    val = np.einsum("rkn,rn->rk", A, uq) + b
+    okm = np.where(keep, val >= np.minimum(b, 0.0) - tol, True).all(axis=1) & has
+    out = np.zeros((u_qp.shape[0], 3))
+    out[okm] = uq[okm]
+    held = okm & (keep & (b <= tol)).any(axis=1)  # a straight step, no arc
+    out[held, 2] = 0.0
+    nw = keep & (kind != ROW_WALL) & (kind != ROW_CONE)
+    anyw = nw.any(axis=1) & ~okm
+    if anyw.any():
+        bb = np.where(nw, b, np.inf)
+        phi = np.arctan2(-A[..., 1], -A[..., 0])
+        near = nw & (bb <= bb.min(axis=1, keepdims=True) + FALLBACK_TIE_MPS)
+        k = np.argmin(np.where(near, np.abs(phi), np.inf), axis=1)
+        gain = look_gain if look_gain > 0 else 3.0
+        om = np.clip(gain * phi[np.arange(u_qp.shape[0]), k], -omega_max_radps, omega_max_radps)
+        out[anyw, 2] = om[anyw]
+    return out
 
 
 @dataclass
@@ -443,21 +485,17 @@ class FovCbfController:
         the two swapped on the estimate's noise). The bearing cone's rows
         (``ROW_CONE``) are not targets: their directions lie ``α`` off the line of sight.
         """
-        tol = 1e-6
-        if u_qp is not None and np.all(A @ u_qp + b >= np.minimum(b, 0.0) - tol):
-            if np.any(b <= tol):  # a held or retreating row: a straight step, no arc
-                return np.array([u_qp[0], u_qp[1], 0.0])
-            return u_qp
-        cfg = self.config
-        out = np.zeros(3)
-        nw = np.flatnonzero((kind != ROW_WALL) & (kind != ROW_CONE))
-        if nw.size:
-            phi = np.arctan2(-A[nw, 1], -A[nw, 0])
-            near = b[nw] <= b[nw].min() + FALLBACK_TIE_MPS
-            k = np.argmin(np.where(near, np.abs(phi), np.inf))
-            gain = self.params.look_gain if self.params.look_gain > 0 else 3.0
-            out[2] = min(max(gain * float(phi[k]), -cfg.omega_max_radps), cfg.omega_max_radps)
-        return out
+        u = np.full((1, 3), np.nan) if u_qp is None else np.asarray(u_qp, np.float64)[None]
+        keep = np.ones((1, b.shape[0]), dtype=bool)
+        return safe_fallback_inputs(
+            u,
+            A[None],
+            b[None],
+            kind[None],
+            keep,
+            self.params.look_gain,
+            self.config.omega_max_radps,
+        )[0]
 
     def solve(
         self,
