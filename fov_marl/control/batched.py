@@ -551,8 +551,9 @@ class BatchedFovCbfController:
         """:meth:`FovCbfController._safe_fallback` for ``(F,)`` robots (u_qp NaN rows: None)."""
         p = self.params
         return safe_fallback_inputs(
-            u_qp, A, b, kind, keep, p.look_gain, self.config.omega_max_radps
-        )
+            u_qp, A, b, kind, keep, p.look_gain, self.config.omega_max_radps,
+            p.fallback_tie_mps, p.fallback_straight,
+        )  # fmt: skip
 
     def _solve_loop(self, u_star, p_body, v_est, d, ids, safety, detected, t0, fov_yield=None):
         """One per-robot controller per robot (the osqp backend)."""

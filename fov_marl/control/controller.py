@@ -92,9 +92,6 @@ __all__ = ["ControlResult", "FovCbfController", "safe_fallback_inputs"]
 _FOV_ROWS = np.array([True, True, False, True])
 #: κ* (normalised) above which the collision rows count as not met: the safe fallback
 _KAPPA_SAFETY = 1e-3
-#: rows whose ``b̃`` lies within this (m/s) of the smallest tie as the safe
-#: fallback's turn target (:meth:`FovCbfController._safe_fallback`)
-FALLBACK_TIE_MPS = 0.25
 
 
 def safe_fallback_inputs(
@@ -105,6 +102,8 @@ def safe_fallback_inputs(
     keep: np.ndarray,
     look_gain: float,
     omega_max_radps: float,
+    tie_mps: float = 0.25,
+    straight: bool = True,
 ) -> np.ndarray:
     """The safe fallback of :meth:`FovCbfController._safe_fallback` for ``F`` robots.
 
@@ -113,6 +112,9 @@ def safe_fallback_inputs(
         A, b, kind: ``(F, K, 3)``, ``(F, K)``, ``(F, K)`` the normalised collision rows.
         keep: ``(F, K)`` bool, the rows that exist (False: padding).
         look_gain: the turn gain (≤ 0: 3). omega_max_radps: the yaw-rate bound.
+        tie_mps: rows within this of the smallest ``b̃`` tie as the turn target
+            (``ControllerParams.fallback_tie_mps``); straight: drop ω of a kept step
+            while a row holds or retreats (``fallback_straight``).
 
     Returns:
         ``(F, 3)`` body-frame inputs ``[vx, vy, ω]``.
@@ -124,14 +126,14 @@ def safe_fallback_inputs(
     okm = np.where(keep, val >= np.minimum(b, 0.0) - tol, True).all(axis=1) & has
     out = np.zeros((u_qp.shape[0], 3))
     out[okm] = uq[okm]
-    held = okm & (keep & (b <= tol)).any(axis=1)  # a straight step, no arc
-    out[held, 2] = 0.0
+    if straight:  # a held or retreating row: a straight step, no arc
+        out[okm & (keep & (b <= tol)).any(axis=1), 2] = 0.0
     nw = keep & (kind != ROW_WALL) & (kind != ROW_CONE)
     anyw = nw.any(axis=1) & ~okm
     if anyw.any():
         bb = np.where(nw, b, np.inf)
         phi = np.arctan2(-A[..., 1], -A[..., 0])
-        near = nw & (bb <= bb.min(axis=1, keepdims=True) + FALLBACK_TIE_MPS)
+        near = nw & (bb <= bb.min(axis=1, keepdims=True) + tie_mps)
         k = np.argmin(np.where(near, np.abs(phi), np.inf), axis=1)
         gain = look_gain if look_gain > 0 else 3.0
         om = np.clip(gain * phi[np.arange(u_qp.shape[0]), k], -omega_max_radps, omega_max_radps)
@@ -478,7 +480,7 @@ class FovCbfController:
         (its own motion then shortens no distance, and with shared responsibility the
         other robot of each pair keeps its share) and turns towards the most dangerous
         row that is not a wall (smallest ``b̃``) at ``look_gain`` times its bearing, so
-        that the camera confirms or clears it. Rows within :data:`FALLBACK_TIE_MPS` of
+        that the camera confirms or clears it. Rows within ``params.fallback_tie_mps`` of
         the smallest ``b̃`` tie, and the one nearest the camera's axis wins: turning
         towards it keeps it the target (measured: with the plain argmin, robots packed
         along a wall between two neighbours turned back and forth step after step as
@@ -487,15 +489,11 @@ class FovCbfController:
         """
         u = np.full((1, 3), np.nan) if u_qp is None else np.asarray(u_qp, np.float64)[None]
         keep = np.ones((1, b.shape[0]), dtype=bool)
+        p = self.params
         return safe_fallback_inputs(
-            u,
-            A[None],
-            b[None],
-            kind[None],
-            keep,
-            self.params.look_gain,
-            self.config.omega_max_radps,
-        )[0]
+            u, A[None], b[None], kind[None], keep, p.look_gain, self.config.omega_max_radps,
+            p.fallback_tie_mps, p.fallback_straight,
+        )[0]  # fmt: skip
 
     def solve(
         self,

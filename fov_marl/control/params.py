@@ -130,6 +130,13 @@ field                        default   source / reason
                                        sight; 0 disables. Measured: without it a packed
                                        robot in the safe fallback closed from 1.043 m
                                        to 1.015 m (contact 1.0) in one step
+``fallback_tie_mps``         0.25      rows within this (m/s) of the smallest b̃ tie as
+                                       the safe fallback's turn target; the one nearest
+                                       the camera's axis wins (no back-and-forth between
+                                       two neighbours); 0: the plain argmin
+``fallback_straight``        True      a step the safe fallback keeps while a row holds
+                                       or retreats has ω = 0 (an arc at ω_max curved a
+                                       packed robot from 1.1 m to 1.089 m)
 ``lost_fov_yield``           True      the FoV levels of neighbours the camera does not
                                        report yield when they stall the robot
                                        (:meth:`~fov_marl.control.controller.
@@ -295,6 +302,10 @@ class ControllerParams:
             neighbours (:func:`~fov_marl.control.safety.safety_rows`).
         bearing_cone_max_deg: cap in [0, 80] (degrees) on the bearing cone of the
             neighbour rows within D_s; 0 disables.
+        fallback_tie_mps: in [0, 100] (m/s), rows within this of the smallest b̃ tie as
+            the safe fallback's turn target, the one nearest the camera's axis wins.
+        fallback_straight: a step the safe fallback keeps while a row holds or
+            retreats is straight (ω = 0).
         lost_fov_yield: when the robot is stalled (less than a fifth of u*'s
             translation kept), solve again without the FoV rows of undetected
             neighbours and use that solution if it is much closer to u*.
@@ -360,6 +371,8 @@ class ControllerParams:
     lost_sigma_max_m: float = math.inf
     undetected_quantile: str = "gaussian"
     bearing_cone_max_deg: float = 45.0
+    fallback_tie_mps: float = 0.25
+    fallback_straight: bool = True
     walls: bool = True
     wall_gain: float = 2.5
     deadlock_turn_deg: float = 60.0
@@ -412,6 +425,7 @@ class ControllerParams:
             "motion_cone",
             "walls",
             "lost_fov_yield",
+            "fallback_straight",
         ):
             _check_bool(name, getattr(self, name))
         _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)
@@ -445,6 +459,7 @@ class ControllerParams:
         _check("last_seen_max_age_s", self.last_seen_max_age_s, 0.0, 1e6, lo_open=True)
         _check("blind_travel_m", self.blind_travel_m, 0.0, 100.0)
         _check("bearing_cone_max_deg", self.bearing_cone_max_deg, 0.0, 80.0)
+        _check("fallback_tie_mps", self.fallback_tie_mps, 0.0, 100.0)
         if self.lost_sigma_max_m != math.inf:  # inf (the default) turns it off
             check_real(
                 "lost_sigma_max_m", self.lost_sigma_max_m, 0.0, 1e6, lo_open=True, note="or inf"

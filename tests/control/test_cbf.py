@@ -421,6 +421,11 @@ def test_row_authority_closed_form():
         ("priority_hysteresis_m", -0.1),
         ("priority_hysteresis_m", float("nan")),
         ("undetected_quantile", "median"),
+        ("bearing_cone_max_deg", -1.0),
+        ("bearing_cone_max_deg", 85.0),
+        ("fallback_tie_mps", -0.1),
+        ("fallback_tie_mps", float("nan")),
+        ("fallback_straight", 1),
     ],
 )
 def test_controller_params_validation_names_field(field, value):
