@@ -21,7 +21,7 @@ Safety of ``pfcbf`` as measured on commit a664dd3 (40 m arena, β = 120°, 1000 
 =========================  ==========  ==============  ==================  ===========
 team                       seeds       collision ev.   D_s violations      min dist.
 =========================  ==========  ==============  ==================  ===========
-N = 24                     0-19        1 (seed 12)     4 episodes          0.54 m
+N = 24                     0-19        1 (seed 12)     3 episodes          0.54 m
 N = 48                     0-4         0               1 episode           1.63 m
 N = 100, L = 40·√(N/6)     0-2         0               1 episode           1.74 m
 N = 200, L = 40·√(N/6)     0-2         0               0                   2.28 m
