@@ -212,27 +212,31 @@ def test_filter_lets_a_robot_travel_blind_only_its_budget_before_it_looks():
 # --------------------------------------------------------------------------- slow sweeps
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "n, seeds", [(6, range(20)), (12, range(20)), (24, range(20)), (48, range(5))]
+    "n, seeds",
+    [
+        (6, range(20)),
+        (12, range(20)),
+        (24, [s for s in range(20) if s != 12]),
+        # Found on a664dd3: robot 0 hits robot 9 (min 0.54 m, from step 791). It saw the
+        # settled robot 9 at 2.5 m and turned at 1.2-1.4 rad/s; its belief lagged the turn
+        # (mean 0.6-0.85 m off, 95% semi-axes 0.47-0.54 m), so at step 777 the particles
+        # lay inside the view while robot 9 had just left it: all were deleted (Eq. 4),
+        # the block was re-seeded uniform over the arena (a = 33 m), and robot 0 drove at
+        # 0.7-1 m/s, 54 degrees off its axis, into robot 9 at 67 degrees, just outside
+        # its 60 degree half-view. Strict: remove the marker the day it stops colliding.
+        pytest.param(
+            24,
+            [12],
+            marks=pytest.mark.xfail(strict=True, reason="open: a belief lost in a fast turn"),
+            id="24-seed12",
+        ),
+        (48, range(5)),
+    ],
 )
 def test_pfcbf_papers_arena_no_collisions(n, seeds):
     for seed in seeds:
         rec = _coverage(n, seed)
         assert rec.collisions == 0, (n, seed, rec)
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="open: a belief lost in a fast turn (issue 10)")
-def test_pfcbf_n24_seed12_belief_lost_in_a_fast_turn():
-    """Found on a664dd3 by the N = 24 x 20 seeds sweep: robot 0 collides with robot 9
-    (min 0.54 m, from step 791). Traced: robot 0 saw the settled robot 9 at 2.5 m and
-    turned at 1.2-1.4 rad/s; its belief lagged the turn (mean 0.6-0.85 m from the truth,
-    95% semi-axes 0.47-0.54 m), so at step 777 the particles lay inside the view while
-    robot 9 had just left it: all were deleted (Eq. 4), the block was re-seeded uniform
-    over the arena (a = 33 m) and robot 0 drove at 0.7-1 m/s 54 degrees off its axis,
-    inside its 60 degree half-view, into robot 9 at 67 degrees, just outside it. Strict:
-    it fails the day the episode stops colliding, so the marker is removed then."""
-    rec = _coverage(24, 12)
-    assert rec.collisions == 0, rec
 
 
 @pytest.mark.slow
