@@ -141,10 +141,12 @@ __all__ = ["TrackerParams", "MotionModel", "InitMode", "EgoMotion", "MAX_NOISE"]
 MotionModel = Literal["auto", "mixture", "coverage", "crossing", "static"]
 InitMode = Literal["auto", "known", "uniform"]
 EgoMotion = Literal["action", "pose"]
+RecoveryReseed = Literal["local", "arena"]
 
 _MOTION_MODELS = ("auto", "mixture", "coverage", "crossing", "static")
 _INIT_MODES = ("auto", "known", "uniform")
 _EGO_MOTIONS = ("action", "pose")
+_RECOVERY_RESEEDS = ("local", "arena")
 
 #: Upper bound of the noise intensities and spreads (m/sqrt(s), rad/sqrt(s), m, rad) and
 #: of the other unbounded reals: particle clouds stay finite in float64 far below it.
@@ -162,6 +164,7 @@ _REAL_FIELDS: dict[str, tuple[float, float, bool, bool]] = {
     "mc_error_factor": (0.0, MAX_NOISE, False, False),
     "recovery_min_ess": (0.0, 1e9, False, False),
     "recovery_gate_chi2": (0.0, 1e9, True, False),
+    "recovery_local_margin_m": (0.0, MAX_NOISE, False, False),
     "min_meas_var": (0.0, MAX_NOISE, True, False),
     # mode mixture (motion_model="mixture")
     "mode_prior_static": (0.0, 1.0, False, False),
@@ -213,6 +216,16 @@ class TrackerParams:
         recovery_min_ess: effective-sample-size threshold of the re-seed around a
             detection, in [0, 1e9].
         recovery_gate_chi2: squared-Mahalanobis gate of the re-seed, in (0, 1e9].
+        recovery_reseed: where a neighbour whose particles were all deleted by the view
+            (Eq. 4) is re-seeded, outside F_i: ``"local"`` (the default) uniform in the
+            disc around the deleted cloud's mean of radius (the cloud's largest particle
+            distance from its mean) + ``recovery_local_margin_m``, the neighbour having
+            just been where the belief was but not where the view now looks; or
+            ``"arena"``, uniform over the whole arena (the first versions' choice; a
+            belief lost next to the view then spreads over tens of metres and the
+            safety rows lose a neighbour that is 2 m away).
+        recovery_local_margin_m: margin of the ``"local"`` re-seed disc, in [0, 1e6] m:
+            how far the truth may lie outside the failed cloud.
         ego_motion: ``"action"`` or ``"pose"`` (how Σ_i's own motion is obtained).
         clamp_to_arena: clamp particle positions to ``[r, L - r]^2`` like the env does
             (a bool).
@@ -245,6 +258,8 @@ class TrackerParams:
     mc_error_factor: float = 15.0
     recovery_min_ess: float = 10.0
     recovery_gate_chi2: float = -2.0 * math.log(1e-6)
+    recovery_reseed: RecoveryReseed = "local"
+    recovery_local_margin_m: float = 2.5
     ego_motion: EgoMotion = "action"
     clamp_to_arena: bool = True
     min_meas_var: float = 1e-4
@@ -276,6 +291,11 @@ class TrackerParams:
         set_(self, "init_mode", check_choice("init_mode", self.init_mode, _INIT_MODES))
         set_(self, "ego_motion", check_choice("ego_motion", self.ego_motion, _EGO_MOTIONS))
         set_(self, "clamp_to_arena", check_bool("clamp_to_arena", self.clamp_to_arena))
+        set_(
+            self,
+            "recovery_reseed",
+            check_choice("recovery_reseed", self.recovery_reseed, _RECOVERY_RESEEDS),
+        )
         if self.coverage_standoff_m is not None:
             set_(
                 self,

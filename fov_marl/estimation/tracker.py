@@ -25,7 +25,13 @@ Generators, and over the rare re-seeded neighbours):
 2. weight (Eq. 3): Gaussian likelihood of the detection, in log space;
 3. deletion (Eq. 4): particles inside F_i of an undetected neighbour get weight 0;
 4. recovery (a documented addition): a neighbour whose particles were all deleted is
-   re-seeded uniformly over the arena outside F_i; a detected neighbour whose particles
+   re-seeded outside F_i, by default (``recovery_reseed="local"``) uniform in the disc
+   around the deleted cloud's mean whose radius is the cloud's extent plus
+   ``recovery_local_margin_m`` (the neighbour was just where the belief put it, within
+   that error, and is not where the view now looks), or (``"arena"``) uniform over the
+   arena (the belief of a neighbour that slipped just out of view then spreads over
+   tens of metres and it stops counting for safety: the traced N = 24 collision of
+   :mod:`fov_marl.baselines.pfcbf`); a detected neighbour whose particles
    miss the detection (nearest one beyond the χ² gate, or effective sample size below
    ``min(recovery_min_ess, P_j / 2)``) is re-seeded from N(z, Σ_MEAS) (clamped to the
    arena), the posterior when the prior is flat on the likelihood's scale. Both are
@@ -588,7 +594,13 @@ class _BankCore:
             self._recover_mixture(g, k, s, e)
             self.n_recoveries_detection[k] += 1
         else:
-            bx, by = self._uniform_outside_fov(g, n, pose[k])
+            if self.params.recovery_reseed == "local":
+                cx, cy = float(x[s:e].mean()), float(y[s:e].mean())
+                spread = float(np.sqrt(np.max((x[s:e] - cx) ** 2 + (y[s:e] - cy) ** 2)))
+                radius = spread + self.params.recovery_local_margin_m
+                bx, by = self._disc_outside_fov(g, n, cx, cy, radius, pose[k])
+            else:
+                bx, by = self._uniform_outside_fov(g, n, pose[k])
             x[s:e] = bx
             y[s:e] = by
             h[s:e] = 2.0 * math.pi * g.random(n) - math.pi
@@ -609,6 +621,41 @@ class _BankCore:
         self._vx.reshape(-1)[s:e] = vx
         self._vy.reshape(-1)[s:e] = vy
         self._mode.reshape(-1)[s:e] = K.stratified_modes(np.arange(n), np.full(n, n), self._cdf)
+
+    def _disc_outside_fov(
+        self, g: np.random.Generator, n: int, cx: float, cy: float, radius: float, pose
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``n`` points uniform in the disc of ``radius`` around ``(cx, cy)`` (Σ_i) that lie
+        inside the arena ``[r, L − r]^2`` and outside F_i (``recovery_reseed="local"``).
+
+        Rejection sampling in rounds of ``random((2, max(2 need, 16)))`` (radius by the
+        square root of the first row, angle from the second); after 50 rounds (only when
+        the disc lies almost wholly in F_i or beyond the walls) the rest come from
+        :meth:`_uniform_outside_fov`.
+        """
+        out_x = np.empty(n)
+        out_y = np.empty(n)
+        got = 0
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        for _ in range(50):
+            need = n - got
+            uu = g.random((2, max(2 * need, 16)))
+            rr = radius * np.sqrt(uu[0])
+            th = 2.0 * math.pi * uu[1]
+            bx = cx + rr * np.cos(th)
+            by = cy + rr * np.sin(th)
+            wx = pose[0] + c * bx - s * by
+            wy = pose[1] + s * bx + c * by
+            ok = ~K.in_fov_xy(bx, by, self._fov, self._range)
+            ok &= (wx >= self._lo) & (wx <= self._hi) & (wy >= self._lo) & (wy <= self._hi)
+            bx, by = bx[ok][:need], by[ok][:need]
+            out_x[got : got + bx.size] = bx
+            out_y[got : got + by.size] = by
+            got += bx.size
+            if got == n:
+                return out_x, out_y
+        out_x[got:], out_y[got:] = self._uniform_outside_fov(g, n - got, pose)
+        return out_x, out_y
 
     def _uniform_outside_fov(self, g: np.random.Generator, n: int, pose: np.ndarray):
         """``n`` points uniform over the arena ``[r, L − r]^2`` outside F_i, in Σ_i.

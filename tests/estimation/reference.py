@@ -148,6 +148,28 @@ def uniform_outside_fov(rng, n, pose, cfg):
     return np.concatenate([np.array(pts).reshape(-1, 2), last[: n - len(pts)]])
 
 
+def disc_outside_fov(rng, n, centre, radius, pose, cfg):
+    """Uniform in the disc around ``centre`` (body frame), inside the arena, outside F_i."""
+    lo, hi = cfg.robot_radius_m, cfg.arena_size_m - cfg.robot_radius_m
+    pts: list[np.ndarray] = []
+    for _ in range(50):
+        need = n - len(pts)
+        uu = rng.random((2, max(2 * need, 16)))
+        for k in range(uu.shape[1]):
+            q = centre + radius * math.sqrt(uu[0, k]) * np.array(
+                [math.cos(2 * math.pi * uu[1, k]), math.sin(2 * math.pi * uu[1, k])]
+            )
+            w = body_to_world(q, pose)
+            inside = lo <= w[0] <= hi and lo <= w[1] <= hi
+            if inside and not in_fov(q[None], cfg.fov_rad, cfg.detection_range_m)[0]:
+                if len(pts) < n:
+                    pts.append(q)
+        if len(pts) == n:
+            return np.array(pts)
+    rest = uniform_outside_fov(rng, n - len(pts), pose, cfg)
+    return np.concatenate([np.array(pts).reshape(-1, 2), rest])
+
+
 def reference_step(
     cfg: ScenarioConfig,
     params: TrackerParams,
@@ -265,8 +287,13 @@ def reference_step(
             gone = in_fov(p, cfg.fov_rad, cfg.detection_range_m)
             w = np.where(gone, 0.0, 1.0)
             bad = bool(gone.all())
-            if bad:
+            if bad and params.recovery_reseed == "local":
+                centre = p.mean(axis=0)
+                radius = np.linalg.norm(p - centre, axis=1).max() + params.recovery_local_margin_m
+                p = disc_outside_fov(rng, counts[j], centre, radius, pose_now, cfg)
+            elif bad:
                 p = uniform_outside_fov(rng, counts[j], pose_now, cfg)
+            if bad:
                 h = 2 * math.pi * rng.random(counts[j]) - math.pi
                 w = np.ones(counts[j])
                 if mix:
