@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import math
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -21,7 +22,7 @@ from fov_marl.estimation import (
     TrackerParams,
 )
 from fov_marl.estimation.testing import MiniWorld, RingMotion
-from fov_marl.geometry import body_to_world, in_fov, wrap_angle
+from fov_marl.geometry import body_to_world, chi2_2dof, in_fov, wrap_angle
 from fov_marl.spaces import SLOT_SIZE, ObservationLayout
 
 from .episodes import record_episode
@@ -505,6 +506,83 @@ def test_all_particles_deleted_recovers_outside_fov_without_nan():
         assert _all_finite(tr.estimate())
 
 
+def _lost_at_the_edge(params: TrackerParams):
+    """Robot 0 at (20, 20) facing +x (half-view 60°) sees robot 1 at 3 m, 20° for 5 steps;
+    then robot 1 is at 3 m, 67°, just out of view (the N = 24 collision of
+    ``fov_marl.baselines.pfcbf``), and is reported undetected while its cloud still lies
+    at 20°: every particle is deleted. Returns (tracker, state and rng before the last
+    step, the hidden truth in Σ_0)."""
+    cfg = make_config(n_agents=2)
+    pose = np.array([20.0, 20.0, 0.0])
+    seen = (3.0 * math.cos(math.radians(20)), 3.0 * math.sin(math.radians(20)), 0.0)
+    truth = 3.0 * np.array([math.cos(math.radians(67)), math.sin(math.radians(67))])
+    tr = NeighborTracker(cfg, 0, params, np.random.default_rng(3))
+    poses = np.array([pose, [*body_to_world(np.array(seen[:2]), pose), 0.0]])
+    tr.reset(_obs_with(cfg, 0, pose, {0: seen}), initial_poses_world=poses)
+    for _ in range(5):
+        tr.step(np.zeros(3), _obs_with(cfg, 0, pose, {0: seen}))
+    assert tr.n_recoveries == 0
+    state, rng = _state(tr), copy.deepcopy(tr._bank._cores[0]._rngs[0])
+    tr.step(np.zeros(3), _obs_with(cfg, 0, pose, {}))
+    return cfg, pose, tr, state, rng, truth
+
+
+def test_belief_lost_at_the_view_edge_is_reseeded_next_to_it():
+    """recovery_reseed="local" (the default): the re-seeded cloud lies outside F_i, in the
+    arena, within the deleted cloud's extent + 2.5 m of its mean, and its 95% ellipse
+    (a ≈ 6 m: the crescent of the disc outside the view) holds the neighbour that just
+    slipped out of view; "arena" spreads it over the whole arena (a ≈ 29 m)."""
+    params = TrackerParams(n_particles_total=1000)
+    cfg, pose, tr, state, _, truth = _lost_at_the_edge(params)
+    est = tr.estimate()
+    assert tr.n_recoveries_deleted == 1 and est.recovered[0] and _all_finite(est)
+    p, _ = tr.particles_body()
+    assert not np.any(in_fov(p, cfg.fov_rad, cfg.detection_range_m))
+    centre = np.array([state["x"].mean(), state["y"].mean()])  # before the last prediction
+    spread = np.linalg.norm(np.stack([state["x"], state["y"]], -1) - centre, axis=1).max()
+    # the disc is drawn around the predicted cloud: allow its growth by one step's noise
+    grow = 4.0 * params.mixture_noise_m_per_sqrt_s * math.sqrt(cfg.dt_s)
+    assert np.all(np.linalg.norm(p - centre, axis=1) <= spread + grow + 2.5)
+    pw = body_to_world(p, pose)
+    assert np.all((pw >= cfg.robot_radius_m) & (pw <= cfg.arena_size_m - cfg.robot_radius_m))
+    assert est.ellipse_a[0] < 8.0
+    d = truth - est.mean_body[0]
+    assert d @ np.linalg.solve(est.cov_body[0], d) <= chi2_2dof(0.95)  # truth inside
+    wide = _lost_at_the_edge(replace(params, recovery_reseed="arena"))[2].estimate()
+    assert wide.recovered[0] and wide.ellipse_a[0] > 20.0
+
+
+@pytest.mark.parametrize("reseed", ["local", "arena"])
+@pytest.mark.parametrize("model", ["mixture", "coverage"])
+def test_deletion_reseed_equals_slow_reference(reseed, model):
+    params = TrackerParams(n_particles_total=400, motion_model=model, recovery_reseed=reseed)
+    cfg, pose, tr, state, rng, _ = _lost_at_the_edge(params)
+    new_state, ref = reference_step(
+        cfg, params, 0, state, np.zeros(3), _obs_with(cfg, 0, pose, {}), rng
+    )
+    est = tr.estimate()
+    assert ref["recovered"][0] and est.recovered[0]
+    np.testing.assert_allclose(est.mean_body, ref["mean"], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(est.cov_body, ref["cov"], rtol=1e-8, atol=1e-9)
+    s = _state(tr)
+    np.testing.assert_allclose(s["x"], new_state["x"], atol=1e-9)
+    np.testing.assert_allclose(s["y"], new_state["y"], atol=1e-9)
+
+
+def test_local_reseed_falls_back_to_the_arena_when_the_disc_is_in_view():
+    """A neighbour lost deep inside F_i (5 m straight ahead): its whole disc is in view,
+    so it can only be elsewhere: the re-seed falls back to uniform over the arena."""
+    cfg = make_config(n_agents=2)
+    pose = np.array([20.0, 20.0, 0.0])
+    tr = NeighborTracker(cfg, 0, TrackerParams(n_particles_total=500), np.random.default_rng(0))
+    tr.reset(_obs_with(cfg, 0, pose, {0: (5.0, 0.0, 0.0)}), np.array([pose, [25.0, 20.0, 0]]))
+    tr.step(np.zeros(3), _obs_with(cfg, 0, pose, {}))
+    p, _ = tr.particles_body()
+    assert tr.n_recoveries_deleted == 1
+    assert not np.any(in_fov(p, cfg.fov_rad, cfg.detection_range_m))
+    assert tr.estimate().ellipse_a[0] > 10.0
+
+
 def test_far_off_detection_reseeds_around_it():
     cfg = make_config(n_agents=3)
     pose = np.array([5.0, 5.0, 0.0])
@@ -634,6 +712,10 @@ def test_bad_inputs_raise_value_errors_naming_the_argument():
         ("confidence", 0.0),
         ("recovery_min_ess", -1.0),
         ("recovery_gate_chi2", 0.0),
+        ("recovery_reseed", "nearby"),
+        ("recovery_reseed", None),
+        ("recovery_local_margin_m", -0.5),
+        ("recovery_local_margin_m", float("nan")),
         ("ego_motion", "odometry"),
         ("clamp_to_arena", 1),
         ("min_meas_var", 0.0),
