@@ -78,10 +78,13 @@ def test_settled_pfcbf_team_does_not_chatter():
     assert swapped[2] >= 10, swapped  # the measurement discriminates
 
 
-def _stress(episode, **controller):
+def _stress(episode, tracker=None, **controller):
     from fov_marl.stress import StressCase, run_stress_episode
 
-    kw = {"filter_kwargs": {"controller_params": controller}} if controller else {}
+    fk = {"controller_params": controller} if controller else {}
+    if tracker:
+        fk["tracker_params"] = tracker
+    kw = {"filter_kwargs": fk} if fk else {}
     return run_stress_episode(StressCase("head_on", 12, 120.0, "random", **kw), episode, 300)
 
 
@@ -297,6 +300,10 @@ def test_crossing_seed_7_stalls_without_lost_fov_yield():
                 "lost_fov_yield": False,
                 "priority_hysteresis_m": 0.0,
                 **_BEFORE_CONE,
+                # and before the local re-seed of deleted beliefs, which also sends it on
+                # another course (0 collisions without the rows; 1, min 0.09 m, with the
+                # arena-wide re-seed)
+                "tracker": {"recovery_reseed": "arena"},
             },
         ),
     ],
