@@ -163,6 +163,10 @@ def test_bench_json_reports_every_layer(capsys):
     ctrl = [r for r in rows if r["section"] == "controller"]
     assert ctrl[0]["n_agents"] == 6 and ctrl[0]["ms_per_robot_step"] > 0
     assert {"tracker_ms", "lloyd_ms", "qp_ms"} <= set(ctrl[0])
+    # the budget is also timed in the paper's 40 m arena after a warm-up (the packed team)
+    paper = [r for r in ctrl if r["arena"] == "paper"]
+    assert paper and paper[0]["arena_size_m"] == 40.0 and paper[0]["warmup_steps"] >= 10
+    assert {r["arena"] for r in ctrl} == {"scaled", "paper"}
     env6 = [r for r in rows if r["section"] == "env" and r["n_agents"] == 6]
     assert env6 and env6[0]["agent_steps_per_s"] > 0
 
