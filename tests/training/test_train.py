@@ -358,7 +358,9 @@ def test_ctrl_c_saves_says_where_and_exits_130(tmp_path):
 
     out = tmp_path / "run"
     argv = [*TINY_CLI, "--timesteps", "1e9", "--out", str(out), "--checkpoint-every", "128"]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    # PYTHONFAULTHANDLER: a child that hangs after SIGINT is aborted below and dumps
+    # every thread's stack into the failure message (it hung once in a full CI run)
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONFAULTHANDLER": "1"}
     proc = subprocess.Popen(
         [sys.executable, "-m", "fov_marl.cli", *argv],
         stdout=subprocess.PIPE,
@@ -376,7 +378,12 @@ def test_ctrl_c_saves_says_where_and_exits_130(tmp_path):
             time.sleep(0.1)
         assert list(out.glob("checkpoints/*.zip")), "no checkpoint within 300 s"
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=300)
+        try:
+            _, err = proc.communicate(timeout=300)
+        except subprocess.TimeoutExpired:
+            proc.send_signal(signal.SIGABRT)
+            _, err = proc.communicate(timeout=60)
+            pytest.fail(f"no exit within 300 s of SIGINT; the child's stacks:\n{err[-6000:]}")
     finally:
         if proc.poll() is None:
             proc.kill()
