@@ -231,11 +231,11 @@ def bench_controller(
     ablation); one row per (model, N). ``arena``: ``"scaled"`` (L = 40·√(N/6) m, at
     least 40 m: the density of the paper's N = 6 team) or ``"paper"`` (the paper's
     40 m arena at every N). The first ``warmup`` steps are untimed. The cost grows as
-    the team packs and settles: measured (pfcbf, 40 m arena, seed 0, one free core),
-    N = 24 costs 0.80 ms per robot-step over steps 10-70 of the scaled 80 m arena but
-    1.6 ms over steps 0-100 and 2.1-2.3 ms over steps 100-600 of the 40 m arena (the
-    cascade's QPs: 1.1 -> 1.5-1.7 ms), so the run reports the paper's arena after a
-    100-step warm-up too.
+    the team packs and settles: measured (pfcbf, N = 24, seed 0, one free core), 0.80 ms
+    per robot-step over steps 10-70 of the scaled 80 m arena, but in the 40 m arena
+    1.6 ms over steps 0-100 and 2.1-2.3 ms over steps 100-600 (the cascade's QPs:
+    1.1 -> 1.5-1.7 ms), so :func:`run_benchmarks` also reports the paper's arena after
+    a 100-step warm-up.
     """
     if arena not in ("scaled", "paper"):
         raise ValueError(f"arena must be 'scaled' or 'paper', got {arena!r}")

@@ -79,13 +79,13 @@ def test_settled_pfcbf_team_does_not_chatter():
 
 
 def _stress(episode, tracker=None, **controller):
+    """head_on, N = 12, β = 120°, random start; ``tracker`` / ``controller``: overrides of
+    the filter's defaults (empty: the shipped filter)."""
     from fov_marl.stress import StressCase, run_stress_episode
 
-    fk = {"controller_params": controller} if controller else {}
-    if tracker:
-        fk["tracker_params"] = tracker
-    kw = {"filter_kwargs": fk} if fk else {}
-    return run_stress_episode(StressCase("head_on", 12, 120.0, "random", **kw), episode, 300)
+    fk = {"controller_params": controller, "tracker_params": tracker or {}}
+    case = StressCase("head_on", 12, 120.0, "random", filter_kwargs=fk)
+    return run_stress_episode(case, episode, 300)
 
 
 @pytest.mark.parametrize("episode", [1, 2])

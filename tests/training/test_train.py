@@ -359,9 +359,10 @@ def test_ctrl_c_saves_says_where_and_exits_130(tmp_path):
     out = tmp_path / "run"
     argv = [*TINY_CLI, "--timesteps", "1e9", "--out", str(out), "--checkpoint-every", "128"]
     # PYTHONFAULTHANDLER: a child that does not exit after SIGINT is aborted below and
-    # dumps every thread's stack into the failure message. preexec_fn: pytest-xdist
-    # workers ignore SIGINT and a child inherits SIG_IGN, so Python would never raise
-    # KeyboardInterrupt in it (under `make test` the child trained on for 300 s)
+    # dumps every thread's stack into the failure message. preexec_fn: a shell starts a
+    # background job with SIGINT ignored and a child inherits SIG_IGN, so Python would
+    # never raise KeyboardInterrupt in it (`make test` run in the background: the child
+    # trained on for 300 s)
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "PYTHONFAULTHANDLER": "1"}
     proc = subprocess.Popen(
         [sys.executable, "-m", "fov_marl.cli", *argv],
