@@ -36,7 +36,7 @@ from fov_marl.control.cbf import (
 )
 from fov_marl.control.controller import ControlResult, FovCbfController, safe_fallback_inputs
 from fov_marl.control.params import ControllerParams
-from fov_marl.control.safety import SafetyRows, team_safety_rows
+from fov_marl.control.safety import SafetyRows, arc_yaw_guard, team_safety_rows
 
 __all__ = ["BatchControlResult", "BatchedFovCbfController", "CONTROL_STATUSES"]
 
@@ -461,6 +461,10 @@ class BatchedFovCbfController:
                     status[f] = _SFB
                     fallback[f] = True
                     self.stats["safety_fallbacks"] += int(f.size)
+                if p.arc_yaw_guard:  # safety Section 1c: the step's arc
+                    res_u[qi] = arc_yaw_guard(
+                        res_u[qi], sA[qi], sb[qi], sk[qi], skeep[qi], cfg.dt_s
+                    )
         t2 = time.perf_counter()
         du = res_u - self._project(u_given)
         intervened = np.sqrt(np.einsum("rk,rk->r", du, du)) > p.intervention_tol

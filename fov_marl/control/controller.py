@@ -85,7 +85,7 @@ from fov_marl.control.cbf import (
 )
 from fov_marl.control.params import ControllerParams
 from fov_marl.control.qp import HierarchicalQP
-from fov_marl.control.safety import ROW_CONE, ROW_WALL, team_safety_rows
+from fov_marl.control.safety import ROW_CONE, ROW_WALL, arc_yaw_guard, team_safety_rows
 
 __all__ = ["ControlResult", "FovCbfController", "safe_fallback_inputs"]
 
@@ -644,6 +644,9 @@ class FovCbfController:
             u = self._safe_fallback(None if qres.status == "qp_failed" else u, sA, sb, sk)
             status, fallback = "safety_fallback", True
             st["safety_fallbacks"] += 1
+        if sb.size and p.arc_yaw_guard:  # safety Section 1c: the step's arc
+            keep = np.ones((1, sb.size), dtype=bool)
+            u = arc_yaw_guard(u[None], sA[None], sb[None], sk[None], keep, cfg.dt_s)[0]
         du = u - (u_proj if u_star is u_given else self._project(u_given))
         intervened = bool(math.sqrt(float(du @ du)) > p.intervention_tol)
         st["qp_solves"] += qres.n_qp

@@ -137,6 +137,12 @@ field                        default   source / reason
 ``fallback_straight``        True      a step the safe fallback keeps while a row holds
                                        or retreats has ω = 0 (an arc at ω_max curved a
                                        packed robot from 1.1 m to 1.089 m)
+``arc_yaw_guard``            True      the output's yaw rate is limited so that the
+                                       exact arc of the step approaches no line of
+                                       sight a row holds (b ≤ 0) further than the
+                                       straight step does (:mod:`~fov_marl.control.
+                                       safety` Section 1c; without it a packed pair
+                                       creeping while turning closed 1.1 to 1.098 m)
 ``lost_fov_yield``           True      the FoV levels of neighbours the camera does not
                                        report yield when they stall the robot
                                        (:meth:`~fov_marl.control.controller.
@@ -306,6 +312,8 @@ class ControllerParams:
             the safe fallback's turn target, the one nearest the camera's axis wins.
         fallback_straight: a step the safe fallback keeps while a row holds or
             retreats is straight (ω = 0).
+        arc_yaw_guard: limit the output's yaw rate so the step's arc approaches no
+            held line of sight (:func:`~fov_marl.control.safety.arc_yaw_guard`).
         lost_fov_yield: when the robot is stalled (less than a fifth of u*'s
             translation kept), solve again without the FoV rows of undetected
             neighbours and use that solution if it is much closer to u*.
@@ -373,6 +381,7 @@ class ControllerParams:
     bearing_cone_max_deg: float = 45.0
     fallback_tie_mps: float = 0.25
     fallback_straight: bool = True
+    arc_yaw_guard: bool = True
     walls: bool = True
     wall_gain: float = 2.5
     deadlock_turn_deg: float = 60.0
@@ -426,6 +435,7 @@ class ControllerParams:
             "walls",
             "lost_fov_yield",
             "fallback_straight",
+            "arc_yaw_guard",
         ):
             _check_bool(name, getattr(self, name))
         _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)

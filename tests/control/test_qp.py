@@ -319,3 +319,27 @@ def test_random_dense_hierarchies_never_fall_back():
         res = qp.solve(A, b, rng.integers(0, 6, R), rng.uniform(-2, 2, 3))
         assert not res.fallback, res.status
         assert np.all(A @ res.u + b + res.kappa >= -1e-4)
+
+
+@given(st.integers(0, 10_000), st.integers(1, 60))
+def test_direct_nnls_gives_the_public_functions_bits(seed, m):
+    """The compiled NNLS called without SciPy's wrapper (where this SciPy has it) returns
+    exactly what ``scipy.optimize.nnls`` returns on the least-distance programs the
+    cascade builds (``(4, m)`` and ``(4 + k, m)``), so the speed-up changes no number."""
+    from scipy.optimize import nnls
+
+    from fov_marl.control import qp
+
+    rng = np.random.default_rng(seed)
+    E = rng.normal(size=(4 + int(rng.integers(0, 4)), m))
+    f = np.zeros(E.shape[0])
+    f[-1] = 1.0
+    maxiter = 20 * (m + E.shape[0])
+    z, r = qp._nnls(E.copy(), f.copy(), maxiter)
+    z_ref, r_ref = nnls(E, f, maxiter=maxiter)
+    assert np.array_equal(z, z_ref) and r == r_ref
+
+
+def test_least_distance_rejects_non_finite_data():
+    with pytest.raises(ValueError, match="finite"):
+        least_distance(np.array([[1.0, np.nan]]), np.array([0.5]))

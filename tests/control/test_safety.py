@@ -18,6 +18,7 @@ from fov_marl.control.safety import (
     ROW_NEIGHBOUR,
     ROW_WALL,
     arc_margin,
+    arc_yaw_guard,
     bearing_cone,
     blind_representatives,
     hold_band,
@@ -641,3 +642,112 @@ def test_safe_fallback_keeps_a_retreat_as_a_straight_step():
             u_qp[None], A[None], b[None], kind[None], np.ones((1, 2), bool)
         )
         np.testing.assert_array_equal(batch[0], one)
+
+
+def _arc_step(u: np.ndarray) -> np.ndarray:
+    """``(S, 2)`` exact displacements over dt of inputs ``(S, 3)`` from the body origin."""
+    return integrate_unicycle(np.zeros((u.shape[0], 3)), u[:, :2], u[:, 2], CFG.dt_s)[:, :2]
+
+
+def _guard_case(rng, k):
+    """k random rows ``[−n, 0] u + b ≥ 0`` (some holding, b ≤ 0) and an input meeting
+    the held ones on the straight step (up to round-off)."""
+    ang = rng.uniform(-math.pi, math.pi, k)
+    n = np.stack([np.cos(ang), np.sin(ang)], 1)
+    A = np.zeros((1, k, 3))
+    A[0, :, :2] = -n
+    b = np.where(rng.random(k) < 0.7, 0.0, rng.uniform(-0.3, 0.5, k))[None]
+    kind = rng.choice([ROW_NEIGHBOUR, ROW_BLIND, ROW_CONE, ROW_WALL], size=(1, k)).astype(np.int8)
+    for _ in range(200):
+        v = rng.uniform(-1.0, 1.0, 2)
+        if (n @ v <= np.maximum(b[0], 0.0) + 1e-9).all() or rng.random() < 0.05:
+            break
+    u = np.array([[v[0], v[1], rng.uniform(-CFG.omega_max_radps, CFG.omega_max_radps)]])
+    return n, A, b, kind, u
+
+
+def _worst_excess(n, b, kind, u, turned_only=False):
+    """Largest ``n · Δ_arc / dt − (max(n · v, 0) + ε)`` over the held non-wall rows;
+    ``turned_only``: ``Δ_arc / dt`` without its ``sinc(φ/2) ≤ 1`` (v turned by φ/2, the
+    guard's own condition, tight)."""
+    held = (b[0] <= 0.0) & (kind[0] != ROW_WALL)
+    if not held.any():
+        return -np.inf
+    d = _arc_step(u)[0] / CFG.dt_s
+    if turned_only:
+        t = 0.5 * u[0, 2] * CFG.dt_s
+        d = np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]]) @ u[0, :2]
+    a = n[held] @ u[0, :2]
+    return float((n[held] @ d - (np.maximum(a, 0.0) + 1e-6)).max())
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 100_000), st.integers(1, 8))
+def test_arc_yaw_guard_keeps_every_held_row_on_the_exact_arc(seed, k):
+    """Section 1c against the exact unicycle step: after the guard no held row (b ≤ 0; not
+    walls) is approached on the arc more than on the straight step (+ε); the translation
+    is unchanged; ω keeps its sign and only shrinks; and the bound is tight: a yaw rate
+    1e-6 rad/s nearer the input's breaks some held row (so the guard does not slow turns
+    it need not; tight for v turned by φ/2, the arc's ``sinc(φ/2) ≤ 1`` aside)."""
+    rng = np.random.default_rng(seed)
+    n, A, b, kind, u = _guard_case(rng, k)
+    g = arc_yaw_guard(u, A, b, kind, np.ones((1, k), bool), CFG.dt_s)
+    assert g[0, :2].tolist() == u[0, :2].tolist()
+    assert abs(g[0, 2]) <= abs(u[0, 2]) and g[0, 2] * u[0, 2] >= 0.0
+    assert _worst_excess(n, b, kind, g) <= 1e-12
+    if abs(g[0, 2]) < abs(u[0, 2]) - 1e-9:
+        nearer = g.copy()
+        nearer[0, 2] += math.copysign(1e-6, u[0, 2])
+        assert _worst_excess(n, b, kind, nearer, turned_only=True) > 0.0
+
+
+def test_arc_yaw_guard_stops_the_curve_into_a_packed_neighbour():
+    """The traced dip: an unseen neighbour 1.1 m to the left, its row holds (v_y ≤ 0);
+    creeping forward at 0.05 m/s while turning left at ω_max curves 1 mm towards it. The
+    guard stops that turn (the creep cannot turn left at all without approaching), keeps
+    the right turn and every turn in place, and ignores padding and wall rows."""
+    A = np.array([[[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]])
+    b = np.array([[0.0, -0.5, 0.0]])
+    kind = np.array([[ROW_NEIGHBOUR, ROW_WALL, ROW_BLIND]], np.int8)
+    keep = np.array([[True, True, False]])
+    w = CFG.omega_max_radps
+    creep = np.array([[0.05, 0.0, w]])
+    assert _arc_step(creep)[0, 1] > 5e-4  # it does approach, 0.75 mm
+    left = arc_yaw_guard(creep, A, b, kind, keep, CFG.dt_s)
+    assert left[0, 2] == pytest.approx(0.0, abs=1e-3)
+    assert _arc_step(left)[0, 1] <= 1e-6 * CFG.dt_s
+    for ok in ([0.05, 0.0, -w], [0.0, 0.0, w], [0.0, -0.5, w]):
+        ok = np.array([ok])
+        np.testing.assert_array_equal(arc_yaw_guard(ok, A, b, kind, keep, CFG.dt_s), ok)
+    alone = arc_yaw_guard(creep, A, b, kind, np.array([[False, True, False]]), CFG.dt_s)
+    np.testing.assert_array_equal(alone, creep)  # the wall row and no held neighbour row
+
+
+def test_controllers_apply_the_arc_guard_alike():
+    """Both controllers (per robot and batched) clip the same yaw rate, and switching the
+    guard off gives back the unguarded input."""
+    from fov_marl.control.batched import BatchedFovCbfController
+
+    mean = np.array([[0.0, 1.1]])
+    cov = np.diag([0.01, 0.01])[None]
+    rows = _rows(
+        mean_body=mean[None], cov_body=cov[None], detected=np.array([[False]]),
+        walls=False, blind_bins=0,
+    )  # fmt: skip
+    safety = rows.robot(0)
+    u_star = np.array([0.05, 0.0, CFG.omega_max_radps])
+    out = {}
+    for guard in (True, False):
+        p = ControllerParams(arc_yaw_guard=guard, look_gain=0.0, motion_cone=False)
+        one = FovCbfController(CFG, p).solve(
+            u_star, mean, np.zeros((1, 2)), np.zeros(1), safety=safety,
+            detected=np.array([False]),
+        )  # fmt: skip
+        many = BatchedFovCbfController(CFG, p).solve(
+            u_star[None], mean[None], np.zeros((1, 1, 2)), np.zeros((1, 1)), safety=rows,
+            detected=np.array([[False]]),
+        )  # fmt: skip
+        np.testing.assert_allclose(many.u[0], one.u, atol=1e-9)
+        out[guard] = one.u
+    assert out[False][2] > 0.5 * CFG.omega_max_radps  # unguarded: the FoV levels turn left
+    assert abs(out[True][2]) < 1e-3 and out[True][:2].tolist() == out[False][:2].tolist()
