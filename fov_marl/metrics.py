@@ -66,6 +66,7 @@ from fov_marl.config import ScenarioConfig
 __all__ = [
     "CoverageMetric",
     "action_chatter",
+    "chatter_flips",
     "StripCoverageMetric",
     "coverage_efficiency_reference",
     "gaussian_mass_in_arena",
@@ -724,6 +725,28 @@ class StripCoverageMetric:
 
 
 # --------------------------------------------------------------------------- separation
+def chatter_flips(actions: np.ndarray, threshold: float = 0.05) -> np.ndarray:
+    """Where the period-2 sign flips of :func:`action_chatter` are.
+
+    Args:
+        actions: ``(T, N, A)`` actions of N robots over T consecutive steps (NaN: no
+            action, never a flip).
+        threshold: magnitude at or below which a component counts as zero (no sign).
+
+    Returns:
+        ``(max(T − 2, 0), N, A)`` bool: entry ``t − 1`` is True where step t's component
+        has the opposite sign of both its neighbours in time (1 ≤ t ≤ T − 2).
+    """
+    a = np.asarray(actions, dtype=np.float64)
+    if a.ndim != 3:
+        raise ValueError(f"actions must have shape (T, N, A), got {a.shape}")
+    s = np.where(np.abs(a) > threshold, np.sign(a), 0.0)
+    if s.shape[0] < 3:
+        return np.zeros((0,) + s.shape[1:], dtype=bool)
+    prev, mid, nxt = s[:-2], s[1:-1], s[2:]
+    return (mid != 0) & (prev == -mid) & (nxt == -mid)
+
+
 def action_chatter(actions: np.ndarray, threshold: float = 0.05) -> np.ndarray:
     """Period-2 sign flips per action component (module docstring, "Action chatter").
 
@@ -737,13 +760,9 @@ def action_chatter(actions: np.ndarray, threshold: float = 0.05) -> np.ndarray:
         has the opposite sign of both its neighbours in time.
     """
     a = np.asarray(actions, dtype=np.float64)
-    if a.ndim != 3:
-        raise ValueError(f"actions must have shape (T, N, A), got {a.shape}")
-    s = np.where(np.abs(a) > threshold, np.sign(a), 0.0)
-    if s.shape[0] < 3:
-        return np.zeros(s.shape[2], dtype=np.int64)
-    prev, mid, nxt = s[:-2], s[1:-1], s[2:]
-    flip = (mid != 0) & (prev == -mid) & (nxt == -mid)
+    flip = chatter_flips(a, threshold)
+    if flip.shape[0] == 0:
+        return np.zeros(a.shape[2], dtype=np.int64)
     return flip.sum(axis=(0, 1)).astype(np.int64)
 
 

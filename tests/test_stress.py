@@ -93,10 +93,11 @@ def test_episode_matches_the_env_metrics_and_the_safety_infos():
     obs, _ = env.reset(seed=7)
     adv.reset(seed=0)  # charge_centre draws nothing: the policy seed does not matter
     interv = viol = 0
-    du, applied = [], []
+    du, applied, nominal = [], [], []
     while env.agents:
         obs, _, _, _, infos = env.step(adv.act(obs))
         applied.append([safety_of(infos[a])["applied_action"] for a in env.possible_agents])
+        nominal.append([safety_of(infos[a])["nominal_action"] for a in env.possible_agents])
         interv += sum(safety_of(i)["intervened"] for i in infos.values())
         du += [
             np.linalg.norm(
@@ -115,10 +116,30 @@ def test_episode_matches_the_env_metrics_and_the_safety_infos():
     assert rec["intervened"] == interv and rec["violation_robot_steps"] == viol
     assert rec["action_change_sum"] == pytest.approx(sum(du))
     assert rec["robot_steps"] == 90
+
     # period-2 flips of the applied components, counted by hand
-    s = np.where(np.abs(np.asarray(applied)) > 0.05, np.sign(applied), 0.0)
-    flips = (s[1:-1] != 0) & (s[:-2] == -s[1:-1]) & (s[2:] == -s[1:-1])
+    def by_hand(actions):
+        s = np.where(np.abs(np.asarray(actions)) > 0.05, np.sign(actions), 0.0)
+        return (s[1:-1] != 0) & (s[:-2] == -s[1:-1]) & (s[2:] == -s[1:-1])
+
+    flips = by_hand(applied)
     assert rec["chatter_events"] == int(flips.sum())
+    # the filter's own: the applied component flips where the nominal one does not
+    assert rec["filter_chatter_events"] == int((flips & ~by_hand(nominal)).sum())
+
+
+def test_filter_chatter_tells_the_filters_flips_from_the_policys():
+    """chase_last_seen steers at a noisy detection and flips its own ω (measured: 166
+    nominal ω flips in 600 robot-steps, N = 2, β = 360°, wall start, seed 7000); the
+    filter passes most of them on, so ``chatter_rate`` is high while
+    ``filter_chatter_rate`` (the flips the filter made) is a small part of it. Unfiltered
+    rows have no filter column."""
+    case = StressCase("chase_last_seen", 2, 360.0, "wall")
+    row = run_stress([case], episodes=1, steps=150, seed=7000)[0]
+    assert row["chatter_rate"] > 0.1, row
+    assert row["filter_chatter_rate"] < 0.25 * row["chatter_rate"], row
+    off = run_stress([StressCase("chase_last_seen", 2, 360.0, "wall", False)], 1, 150, seed=7000)
+    assert off[0]["filter_chatter_rate"] is None
 
 
 def test_chatter_rate_tells_alternating_from_steady_actions():
