@@ -177,6 +177,26 @@ def test_filter_packed_wall_start_no_dip_on_the_arc(guard):
         assert ep["min_distance_m"] < 1.099, ep
 
 
+@pytest.mark.parametrize("cleanup", [True, False])
+def test_filter_packed_wall_start_no_creep_within_the_tolerance(cleanup, monkeypatch):
+    """wait_charge, N = 4, β = 120°, wall start, seed 1101 (the packed-start sweep's closest
+    pair after the arc guard, 1.099874 m): a robot's cascade met its rows within its
+    tolerance (κ* 6e-4, status "solved") and backed at 0.6 mm/s into an unseen neighbour
+    1.1 m behind it. With the hold clean-up (``controller.hold_cleanup``) no pair gets
+    closer than it started; without it (the check switched off here) the creep is back."""
+    import fov_marl.control.controller as ctl
+    from fov_marl.stress import StressCase, run_stress_episode
+
+    if not cleanup:
+        monkeypatch.setattr(ctl, "approaches_held_row", lambda u, *a: np.zeros(len(u), bool))
+    ep = run_stress_episode(StressCase("wait_charge", 4, 120.0, "wall"), 1101, 300)
+    assert ep["collisions"] == 0, ep
+    if cleanup:
+        assert ep["min_distance_m"] >= 1.1 - 1e-9, ep
+    else:
+        assert ep["min_distance_m"] < 1.09995, ep
+
+
 def test_filter_narrow_view_edge_regression():
     """wait_charge, N = 24, β = 45°, head_on_pair start, seed 300: with the filter's old
     1 m blind travel budget a robot drove at 0.9 m/s along the edge of its view into a

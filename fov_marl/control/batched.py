@@ -34,7 +34,13 @@ from fov_marl.control.cbf import (
     normalise_rows,
     row_h_max,
 )
-from fov_marl.control.controller import ControlResult, FovCbfController, safe_fallback_inputs
+from fov_marl.control.controller import (
+    ControlResult,
+    FovCbfController,
+    approaches_held_row,
+    hold_cleanup,
+    safe_fallback_inputs,
+)
 from fov_marl.control.params import ControllerParams
 from fov_marl.control.safety import SafetyRows, arc_yaw_guard, team_safety_rows
 
@@ -454,6 +460,15 @@ class BatchedFovCbfController:
             cone_v[qi] = kq[:, M * 4 : n_fov_slots].max(axis=1, initial=0.0)
             if K:
                 sf = (n_s[qi] > 0) & ((safety_kappa[qi] > _KAPPA_SAFETY) | (qres.status == _FAIL))
+                creep = ~sf & (n_s[qi] > 0)
+                creep &= approaches_held_row(qres.u, sA[qi], sb[qi], skeep[qi])
+                for c in np.flatnonzero(creep):  # rare: robot by robot, as the loop does
+                    r, kk = qi[c], skeep[qi[c]]
+                    fixed = hold_cleanup(res_u[r], sA[r][kk], sb[r][kk], cfg.v_max_mps, p.n_polygon)
+                    if fixed is None:
+                        sf[c] = True
+                    else:
+                        res_u[r] = fixed
                 if sf.any():
                     f = qi[sf]
                     u_qp = np.where((qres.status[sf] == _FAIL)[:, None], np.nan, qres.u[sf])

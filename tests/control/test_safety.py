@@ -751,3 +751,51 @@ def test_controllers_apply_the_arc_guard_alike():
         out[guard] = one.u
     assert out[False][2] > 0.5 * CFG.omega_max_radps  # unguarded: the FoV levels turn left
     assert abs(out[True][2]) < 1e-3 and out[True][:2].tolist() == out[False][:2].tolist()
+
+
+def test_hold_cleanup_removes_a_creep_and_keeps_the_rest():
+    """A held row (neighbour ahead, b̃ = 0) crept on at 1 mm/s within the cascade's
+    tolerance: the clean-up removes the creep, keeps the sideways motion and ω, and keeps
+    a met row met; with a retreat it cannot keep (a neighbour behind asking to move
+    forward while the one ahead holds) it gives None (the safe fallback)."""
+    from fov_marl.control.controller import approaches_held_row, hold_cleanup
+
+    A = np.array([[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # do not approach +x; +y bounded
+    b = np.array([0.0, 0.8])
+    u = np.array([0.001, 0.5, 0.3])
+    assert approaches_held_row(u[None], A[None], b[None], np.ones((1, 2), bool))[0]
+    out = hold_cleanup(u, A, b, CFG.v_max_mps, 16)
+    np.testing.assert_allclose(out, [0.0, 0.5, 0.3], atol=1e-12)
+    assert not approaches_held_row(out[None], A[None], b[None], np.ones((1, 2), bool))[0]
+    A2 = np.array([[-1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    b2 = np.array([0.0, -0.2])  # the same direction: hold, and retreat 0.2 (met by u)
+    u2 = np.array([0.0, 0.0, 0.0])
+    assert not approaches_held_row(u2[None], A2[None], b2[None], np.ones((1, 2), bool))[0]
+    A3 = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])  # ahead holds, behind wants +x
+    b3 = np.array([0.0, -0.3])
+    u3 = np.array([0.01, 0.0, 0.0])  # retreats from behind, creeps into the one ahead
+    assert hold_cleanup(u3, A3, b3, CFG.v_max_mps, 16) is None
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(0, 100_000), st.integers(1, 8))
+def test_hold_cleanup_never_approaches_and_never_worsens(seed, k):
+    """Random rows and a near-feasible input: the clean-up's input (when there is one)
+    approaches no row with b̃ ≤ 0, makes no row worse than the input did, stays in the
+    polygon and keeps ω."""
+    from fov_marl.control.controller import APPROACH_TOL, hold_cleanup
+
+    rng = np.random.default_rng(seed)
+    ang = rng.uniform(-math.pi, math.pi, k)
+    A = np.zeros((k, 3))
+    A[:, 0], A[:, 1] = -np.cos(ang), -np.sin(ang)
+    b = np.where(rng.random(k) < 0.6, 0.0, rng.uniform(-0.3, 0.6, k))
+    u = np.array([*rng.uniform(-0.7, 0.7, 2), rng.uniform(-1.5, 1.5)])
+    out = hold_cleanup(u, A, b, 1.0, 16)
+    if out is None:
+        return
+    val, val0 = A @ out, A @ u
+    assert out[2] == u[2]
+    assert (val[b <= 0.0] >= -APPROACH_TOL).all()
+    assert (val >= np.minimum(-b, val0) - 1e-12).all()
+    assert np.hypot(out[0], out[1]) <= 1.0 + 1e-12
