@@ -60,6 +60,9 @@ from fov_marl.control.batched import (
 )
 from fov_marl.control.safety import (
     SafetyRows,
+    bearing_angles_body,
+    bearing_travel_reset,
+    bearing_travel_step,
     blind_travel_reset,
     blind_travel_step,
     team_safety_rows,
@@ -212,6 +215,8 @@ class PfCbfPipeline:
         #: (:mod:`fov_marl.control.safety` Sections 2c, 2d), per row
         self._last_seen_world = np.full((R, m, 2), np.nan)
         self._blind_travel_world = np.zeros((R, 2))
+        #: approach per world bearing since the camera last looked at it (Section 2e)
+        self._bearing_travel = np.zeros((R, self.controller_params.blind_travel_bearings))
         self.counters = {"interventions": 0, "fallbacks": 0, "safety_fallbacks": 0}
 
     # ------------------------------------------------------------------ views
@@ -301,6 +306,7 @@ class PfCbfPipeline:
         self._read_cues(obs_m)
         self._applied = np.zeros((self.n_rows, 3), dtype=np.float32)
         self._blind_travel_world = np.zeros((self.n_rows, 2))
+        self._bearing_travel = np.zeros_like(self._bearing_travel)
         self._fov_lead = np.full(self.n_rows, -1, dtype=np.int64)
         self.counters = {"interventions": 0, "fallbacks": 0, "safety_fallbacks": 0}
         self.last_results = _LazyResults(None, self.n_rows)
@@ -380,6 +386,7 @@ class PfCbfPipeline:
         self._applied = self._applied.copy()  # the last filter() output stays the caller's
         self._applied[rows] = 0.0
         self._blind_travel_world[rows] = 0.0
+        self._bearing_travel[rows] = 0.0
         self._fov_lead[rows] = -1
         if self.estimates == "tracker" and self.n > 1:
             init = self._known_init(init_all)
@@ -411,6 +418,12 @@ class PfCbfPipeline:
             self._own_pose[:, 2],
             self.config.fov_rad,
             math.radians(_LOOK_MARGIN_DEG),
+        )
+        self._bearing_travel = bearing_travel_reset(
+            self._bearing_travel,
+            self._own_pose[:, 2],
+            self.config.fov_rad,
+            math.pi / max(self._bearing_travel.shape[1], 1),  # the bin's whole sector
         )
         self.last_timings = {}
         if self.estimates == "tracker" and self.bank is not None:
@@ -489,6 +502,7 @@ class PfCbfPipeline:
             last_seen_age_s=age,
             blind_travel_body=None if self.estimates == "oracle" else self._blind_travel_body(),
             particle_counts=None if parts is None else e["counts"],
+            bearing_travel_m=None if self.estimates == "oracle" else self._bearing_travel,
         )
 
     def _oracle(self, poses_world: np.ndarray | None) -> None:
@@ -562,22 +576,33 @@ class PfCbfPipeline:
         Where ``‖e‖ ≥ ¾ B`` (:func:`fov_marl.control.safety.blind_travel_step`) and u*
         still translates along ``e``, u*'s yaw rate becomes ``sat(look_gain · φ_e)``,
         φ_e the bearing of ``e`` in Σ_i: the robot looks where it has been going, which
-        releases the budget (the FoV levels, above u*, keep priority). Returns u*
-        unchanged otherwise (and for the oracle, or with the budget disabled).
+        releases the budget (the FoV levels, above u*, keep priority). With the budget
+        per bearing (``blind_travel_bearings > 0``, Section 2e) ``e`` is the most-spent
+        bearing ``c_k n_k`` among those u* approaches. Returns u* unchanged otherwise
+        (and for the oracle, or with the budget disabled).
         """
         par = self.controller_params
         if not self.use_cbf or self.estimates != "tracker" or par.blind_travel_m <= 0.0:
             return u_star
-        e = self._blind_travel_body()
-        r = np.hypot(e[:, 0], e[:, 1])
-        along = np.einsum("ij,ij->i", e, u_star[:, :2]) > 0.0
-        look = (r >= 0.75 * par.blind_travel_m) & along
+        if par.blind_travel_bearings > 0:
+            c = self._bearing_travel
+            ang = bearing_angles_body(c.shape[1], self._own_pose[:, 2])
+            appr = np.cos(ang) * u_star[:, 0:1] + np.sin(ang) * u_star[:, 1:2] > 0.0
+            k = np.argmax(np.where(appr, c, -1.0), axis=1)
+            r = np.where(appr[np.arange(len(k)), k], c[np.arange(len(k)), k], 0.0)
+            phi = ang[np.arange(len(k)), k]
+            look = r >= 0.75 * par.blind_travel_m
+        else:
+            e = self._blind_travel_body()
+            r = np.hypot(e[:, 0], e[:, 1])
+            along = np.einsum("ij,ij->i", e, u_star[:, :2]) > 0.0
+            look = (r >= 0.75 * par.blind_travel_m) & along
+            phi = np.arctan2(e[:, 1], e[:, 0])
         if not np.any(look):
             return u_star
         gain = par.look_gain if par.look_gain > 0.0 else 3.0
         w_max = self.config.omega_max_radps
         out = u_star.copy()
-        phi = np.arctan2(e[:, 1], e[:, 0])
         out[:, 2] = np.where(look, np.clip(gain * phi, -w_max, w_max), u_star[:, 2])
         return out
 
@@ -681,4 +706,14 @@ class PfCbfPipeline:
                 cfg.dt_s,
                 self.controller_params.blind_travel_memory_s,
             )
+            if self._bearing_travel.shape[1]:
+                self._bearing_travel = bearing_travel_step(
+                    self._bearing_travel,
+                    v,
+                    self._own_pose[:, 2],
+                    cfg.dt_s,
+                    self.controller_params.blind_travel_memory_s,
+                    floor_m=self.controller_params.blind_travel_m,
+                    omega_radps=act[:, 2].astype(np.float64) * cfg.omega_max_radps,
+                )
         return act

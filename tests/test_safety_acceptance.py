@@ -14,10 +14,17 @@ import pytest
 from fov_marl.evaluation import run_episode
 from fov_marl.infos import safety_of
 
-#: the filter before the bearing cone and the fallback's tie rule and straight steps: the
-#: counterfactuals below run on the filter their episodes were found with (these changes
-#: send the episodes on other courses that stay clear even without the rows they test)
-_BEFORE_CONE = {"bearing_cone_max_deg": 0.0, "fallback_tie_mps": 0.0, "fallback_straight": False}
+#: the filter before the bearing cone, the fallback's tie rule and straight steps, the arc
+#: guard and the blind travel budget per bearing: the counterfactuals below run on the
+#: filter their episodes were found with (these changes send the episodes on other courses
+#: that stay clear even without the rows they test)
+_BEFORE_CONE = {
+    "bearing_cone_max_deg": 0.0,
+    "fallback_tie_mps": 0.0,
+    "fallback_straight": False,
+    "arc_yaw_guard": False,
+    "blind_travel_bearings": 0,
+}
 
 
 def _scaled(n: int) -> dict:
@@ -187,9 +194,14 @@ def test_filter_packed_wall_start_no_creep_within_the_tolerance(cleanup, monkeyp
     import fov_marl.control.controller as ctl
     from fov_marl.stress import StressCase, run_stress_episode
 
+    fk = {}
     if not cleanup:
         monkeypatch.setattr(ctl, "approaches_held_row", lambda u, *a: np.zeros(len(u), bool))
-    ep = run_stress_episode(StressCase("wait_charge", 4, 120.0, "wall"), 1101, 300)
+        # found on the single-vector travel budget; the per-bearing one (safety Section
+        # 2e) happens to stop this creep as well
+        fk = {"controller_params": {"blind_travel_bearings": 0}}
+    case = StressCase("wait_charge", 4, 120.0, "wall", filter_kwargs=fk)
+    ep = run_stress_episode(case, 1101, 300)
     assert ep["collisions"] == 0, ep
     if cleanup:
         assert ep["min_distance_m"] >= 1.1 - 1e-9, ep
@@ -197,16 +209,27 @@ def test_filter_packed_wall_start_no_creep_within_the_tolerance(cleanup, monkeyp
         assert ep["min_distance_m"] < 1.09995, ep
 
 
-def test_filter_narrow_view_edge_regression():
+@pytest.mark.parametrize("bearings", [24, 0])
+def test_filter_narrow_view_edge_regression(bearings):
     """wait_charge, N = 24, β = 45°, head_on_pair start, seed 300: with the filter's old
     1 m blind travel budget a robot drove at 0.9 m/s along the edge of its view into a
     neighbour parked just outside it (unseen for 44 s, belief 8 m away) and touched at
-    0.95 m in step 250; with the shipped 0.5 m it keeps 2.44 m (the first 260 steps here)."""
+    0.95 m in step 250. With 0.5 m, and since the arc guard (safety Section 1c) sent the
+    episode on another course, a robot drove forward (in view, so the single vector's
+    budget was zeroed every step) in bursts towards a neighbour parked 2.08 m away at
+    −34° to −38°, unseen for 40 s, and closed to 1.41 m: 0.67 m of blind approach on a
+    0.5 m budget. With the budget per bearing (safety Section 2e, the shipped 24
+    bearings) it keeps 2.52 m; the single vector is kept here as the counterfactual."""
     from fov_marl.stress import StressCase, run_stress_episode
 
-    ep = run_stress_episode(StressCase("wait_charge", 24, 45.0, "head_on_pair"), 300, 260)
+    fk = {"controller_params": {"blind_travel_bearings": bearings}}
+    case = StressCase("wait_charge", 24, 45.0, "head_on_pair", filter_kwargs=fk)
+    ep = run_stress_episode(case, 300, 260)
     assert ep["collisions"] == 0, ep
-    assert ep["min_distance_m"] > 2.0, ep
+    if bearings:
+        assert ep["min_distance_m"] > 2.0, ep
+    else:
+        assert ep["min_distance_m"] < 1.5, ep
 
 
 @pytest.mark.slow
@@ -220,18 +243,21 @@ def test_filter_narrow_view_edge_regression_collides_with_a_1m_budget():
     assert run_stress_episode(case, 300, 260)["collisions"] > 0
 
 
-def test_filter_lets_a_robot_travel_blind_only_its_budget_before_it_looks():
+@pytest.mark.parametrize("bearings", [24, 0])
+def test_filter_lets_a_robot_travel_blind_only_its_budget_before_it_looks(bearings):
     """One robot commanded sideways (body frame) at full speed forever, alone in the
-    arena: it gets at most B (+ one step) from where it last looked along its way, is
-    then turned to look (the nominal yaw rate is 0, so the turn counts as an
-    intervention) and goes on: it is never stuck."""
+    arena: it gets at most B (+ one step) from where it last looked along its way (the
+    single vector ``e``), or towards any bearing since it last looked at that bearing
+    (the shipped budget per bearing), is then turned to look (the nominal yaw rate is
+    0, so the turn counts as an intervention) and goes on: it is never stuck."""
     from fov_marl.envs import fov_coverage_v0
     from fov_marl.wrappers import SafetyFilterWrapper
     from fov_marl.wrappers.safety_filter import FILTER_CONTROLLER_DEFAULTS
 
     poses = np.array([[10.0, 20.0, 0.0], [35.0, 35.0, 0.0]])
     env = SafetyFilterWrapper(
-        fov_coverage_v0.parallel_env(n_agents=2, initial_poses=poses, fov_deg=120.0)
+        fov_coverage_v0.parallel_env(n_agents=2, initial_poses=poses, fov_deg=120.0),
+        controller_params={"blind_travel_bearings": bearings},
     )
     env.reset(seed=0)
     budget = FILTER_CONTROLLER_DEFAULTS["blind_travel_m"]
@@ -243,14 +269,71 @@ def test_filter_lets_a_robot_travel_blind_only_its_budget_before_it_looks():
         before = env.unwrapped.poses[0, :2].copy()
         _, _, _, _, infos = env.step(cmd)
         path += float(np.linalg.norm(env.unwrapped.poses[0, :2] - before))
-        e = env.pipeline._blind_travel_world[0]
-        assert np.linalg.norm(e) <= budget + step_m + 1e-9
+        if bearings:
+            assert env.pipeline._bearing_travel[0].max() <= budget + step_m + 1e-9
+        else:
+            e = env.pipeline._blind_travel_world[0]
+            assert np.linalg.norm(e) <= budget + step_m + 1e-9
         s = safety_of(infos["robot_0"])
         if abs(s["applied_action"][2]) > 0.1:
             turned += 1
             assert s["intervened"]
     assert turned >= 5
-    assert path > 8.0, path
+    # measured: 8.2 m with the vector, 6.4 m per bearing (it also looks beside its way)
+    assert path > (8.0 if bearings == 0 else 6.0), path
+
+
+@pytest.mark.parametrize(
+    "adversary, fov_deg, start",
+    [("straight", 45.0, "random"), ("random", 45.0, "random"), ("charge_centre", 90.0, "random"),
+     ("spin_charge", 120.0, "clustered"), ("wall_slide", 120.0, "wall"),
+     ("rush", 45.0, "corner")],
+)  # fmt: skip
+def test_filter_no_bearing_is_approached_blind_beyond_the_budget(adversary, fov_deg, start):
+    """The property of the per-bearing budget (safety Section 2e), from the true poses
+    alone: for each of the 24 budget bearings ψ_k, every robot's net approach
+    ``n_k · (p_t − p_look)`` since the bearing's 15° sector was last wholly inside its
+    view (``|ψ_k − yaw| ≤ β/2 − 7.5°``; at the start every bearing counts as looked at)
+    stays within B, one step and the arc's departure from the straight step, with the
+    leak switched off (T = 1e6 s) so the bound is exact."""
+    from fov_marl.adversaries import make_adversary, make_start_poses
+    from fov_marl.config import make_config
+    from fov_marl.control.safety import arc_margin
+    from fov_marl.envs import fov_coverage_v0
+    from fov_marl.wrappers import SafetyFilterWrapper
+    from fov_marl.wrappers.safety_filter import FILTER_CONTROLLER_DEFAULTS
+
+    n, steps = 6, 150
+    cfg = make_config(scenario="coverage", n_agents=n, fov_deg=fov_deg)
+    poses = make_start_poses(start, cfg, np.random.default_rng(3))
+    env = SafetyFilterWrapper(
+        fov_coverage_v0.parallel_env(
+            n_agents=n, fov_deg=fov_deg, initial_poses=poses, max_cycles=steps
+        ),
+        controller_params={"blind_travel_memory_s": 1e6},
+    )
+    adv = make_adversary(adversary, env)
+    obs, _ = env.reset(seed=5)
+    adv.reset(seed=6)
+    B = FILTER_CONTROLLER_DEFAULTS["blind_travel_m"]
+    K = FILTER_CONTROLLER_DEFAULTS["blind_travel_bearings"]
+    bound = B + cfg.v_max_mps * cfg.dt_s
+    bound += arc_margin(cfg.v_max_mps, cfg.omega_max_radps, cfg.dt_s) + 1e-6
+    psi = 2.0 * math.pi * np.arange(K) / K
+    n_w = np.stack([np.cos(psi), np.sin(psi)], -1)  # (K, 2)
+    half = 0.5 * math.radians(fov_deg) - math.pi / K
+    look = np.repeat(env.unwrapped.poses[:, None, :2], K, 1)  # (N, K, 2)
+    worst = 0.0
+    while env.agents:
+        obs, *_ = env.step(adv.act(obs))
+        p = env.unwrapped.poses
+        approach = np.einsum("nkd,kd->nk", p[:, None, :2] - look, n_w)
+        worst = max(worst, float(approach.max()))
+        assert approach.max() <= bound, (approach.max(), bound)
+        rel = (psi[None, :] - p[:, 2:3] + math.pi) % (2.0 * math.pi) - math.pi
+        seen = np.abs(rel) <= half + 1e-9
+        look = np.where(seen[..., None], p[:, None, :2], look)
+    assert worst > 0.5 * B  # the bound was approached: the test can fail
 
 
 # --------------------------------------------------------------------------- slow sweeps

@@ -94,6 +94,13 @@ field                        default   source / reason
                                        1.0 m; pfcbf in crossing 0)
 ``blind_travel_memory_s``    30.0      T: time constant (s) of the leak of the blind
                                        travel (jitter is forgiven, persistence is not)
+``blind_travel_bearings``    0         K_b: 0 keeps one net-displacement vector
+                                       (Section 2d); K_b > 0 budgets the approach
+                                       towards K_b world bearings, each reset only
+                                       while the camera looks at it (Section 2e;
+                                       the safety filter uses 24: forward travel
+                                       along a 45° view approached a neighbour just
+                                       outside it 0.67 m on a 0.5 m budget)
 ``walls``                    True      arena walls as rows (the commanded velocity is the
                                        one the robot gets; no sliding)
 ``wall_gain``                2.5       γ_w (1/s) of the wall rows, γ_w dt ≤ 1
@@ -298,6 +305,8 @@ class ControllerParams:
         last_seen_max_age_s: age (s) after which a last-seen point is released, (0, 1e6].
         blind_travel_m: B in [0, 100] (m), the blind travel budget; 0 disables.
         blind_travel_memory_s: T in (0, 1e6] (s), the leak of the blind travel.
+        blind_travel_bearings: K_b in {0} ∪ [4, 360], world bearings of the blind travel
+            budget (0: the single net-displacement vector).
         walls: add the arena walls as rows.
         wall_gain: γ_w (1/s) of the wall rows, (0, 1e3].
         deadlock_turn_deg: turn of u*'s translation (degrees, to the right) tried when
@@ -376,6 +385,7 @@ class ControllerParams:
     last_seen_max_age_s: float = 1e6
     blind_travel_m: float = 0.0
     blind_travel_memory_s: float = 30.0
+    blind_travel_bearings: int = 0
     lost_sigma_max_m: float = math.inf
     undetected_quantile: str = "gaussian"
     bearing_cone_max_deg: float = 45.0
@@ -460,6 +470,12 @@ class ControllerParams:
         _check("responsibility", self.responsibility, 0.0, 1.0, lo_open=True)
         _check("safety_hold_band_m", self.safety_hold_band_m, 0.0, 10.0)
         _check_int("blind_bins", self.blind_bins, 0, 360)
+        _check_int("blind_travel_bearings", self.blind_travel_bearings, 0, 360)
+        if 0 < self.blind_travel_bearings < 4:
+            raise ConfigError(
+                "blind_travel_bearings must be 0 or in [4, 360], "
+                f"got {self.blind_travel_bearings!r}"
+            )
         _check("blind_risk", self.blind_risk, 0.0, 1.0)
         if self.blind_risk >= 1.0:
             raise ConfigError(f"blind_risk must be in [0.0, 1.0), got {self.blind_risk!r}")

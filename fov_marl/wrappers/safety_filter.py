@@ -81,7 +81,8 @@ ablation, not stress-swept.
 The controller defaults are :class:`~fov_marl.control.ControllerParams`' except
 :data:`FILTER_CONTROLLER_DEFAULTS`: no "keep right" deadlock steering, which would
 add a behaviour of the filter's own to the policy's; and the blind travel budget
-(``blind_travel_m = 0.5`` m, :mod:`fov_marl.control.safety` Section 2d): an arbitrary
+(``blind_travel_m = 0.5`` m per bearing, :mod:`fov_marl.control.safety` Sections 2d-2e):
+an arbitrary
 policy may drive persistently into space its robot has not looked at (``pfcbf`` uses
 1 m in coverage, and none in crossing, where it stopped robots that keep their
 neighbours in view while sliding sideways to their targets; measured, 4 crossing
@@ -92,7 +93,12 @@ seed 300. A robot drove at 0.9 m/s along the edge of its 45° view, 18-25° off 
 heading, towards a neighbour parked 2.5 m away just outside that view. The robot had
 not seen that neighbour for 44 s: its belief was 8 m away with a std of 8 m, and no
 particle lay near. It spent the whole 1 m budget in 1.2 s and touched at 0.95 m.
-With 0.5 m the episode keeps 2.44 m. It costs little: random actions (N = 6, 120°,
+With 0.5 m the episode kept 2.44 m, until the arc guard (safety Section 1c) sent it on
+another course on which a robot drove forward, in view, towards a neighbour parked
+2.08 m away at −34° to −38°: every forward step zeroed the budget along its way, and it
+closed to 1.41 m. The budget is therefore kept per bearing (``blind_travel_bearings =
+24``, safety Section 2e): no bearing the robot has not had in view is approached by more
+than 0.5 m; the episode keeps 2.52 m. The 0.5 m (on the single vector) cost little: random actions (N = 6, 120°,
 2 x 300 steps) are changed in 70% of the robot-steps against 67% (51% against 43% over
 2 x 150 steps), and the learned
 policy's final η behind the filter (seeds 0-3) is unchanged within noise. The
@@ -134,6 +140,7 @@ __all__ = ["SafetyFilterWrapper", "FILTER_CONTROLLER_DEFAULTS", "FILTER_TRACKER_
 FILTER_CONTROLLER_DEFAULTS: dict[str, Any] = {
     "deadlock_turn_deg": 0.0,
     "blind_travel_m": 0.5,
+    "blind_travel_bearings": 24,
     "lost_fov_yield": False,
 }
 #: Tracker settings of the filter that differ from :class:`TrackerParams`'s defaults.

@@ -528,6 +528,122 @@ def test_blind_travel_row_stops_travel_along_the_budget_only():
     assert _rows(blind_travel_body=np.zeros((1, 2)), blind_travel_m=1.0).robot(0)[0].shape[0] == 0
 
 
+# ------------------------------------------------------- blind travel per bearing (2e)
+def _bearing_travel_reference(c, v_body, yaw, dt, memory_s, floor_m, omega):
+    """Loop reference of bearing_travel_step: one robot, one bearing at a time; the arc
+    integrated in 2000 small straight pieces."""
+    lam = math.exp(-dt / memory_s) if math.isfinite(memory_s) else 1.0
+    out = np.empty_like(c)
+    for r in range(c.shape[0]):
+        dx = dy = 0.0
+        n_sub = 2000
+        for i in range(n_sub):
+            th = yaw[r] + omega[r] * dt * (i + 0.5) / n_sub
+            cs, sn = math.cos(th), math.sin(th)
+            dx += (cs * v_body[r, 0] - sn * v_body[r, 1]) * dt / n_sub
+            dy += (sn * v_body[r, 0] + cs * v_body[r, 1]) * dt / n_sub
+        for k in range(c.shape[1]):
+            ang = 2.0 * math.pi * k / c.shape[1]
+            out[r, k] = max(-floor_m, lam * c[r, k] + math.cos(ang) * dx + math.sin(ang) * dy)
+    return out
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    k=st.sampled_from([4, 7, 24, 36]),
+    memory_s=st.sampled_from([math.inf, 30.0, 1.0]),
+    floor_m=st.sampled_from([0.0, 0.5]),
+)
+def test_bearing_travel_step_matches_its_loop_reference(seed, k, memory_s, floor_m):
+    from fov_marl.control.safety import bearing_travel_step
+
+    rng = np.random.default_rng(seed)
+    c = rng.uniform(-0.5, 1.0, (3, k))
+    v = rng.uniform(-1.0, 1.0, (3, 2))
+    yaw = rng.uniform(-4.0, 4.0, 3)
+    w = rng.uniform(-1.5, 1.5, 3)
+    np.testing.assert_allclose(
+        bearing_travel_step(c, v, yaw, 0.2, memory_s, floor_m, omega_radps=w),
+        _bearing_travel_reference(c, v, yaw, 0.2, memory_s, floor_m, w),
+        atol=1e-8,
+    )
+    np.testing.assert_allclose(  # without ω: the straight step
+        bearing_travel_step(c, v, yaw, 0.2, memory_s, floor_m),
+        _bearing_travel_reference(c, v, yaw, 0.2, memory_s, floor_m, np.zeros(3)),
+        atol=1e-8,
+    )
+
+
+def test_bearing_travel_counts_the_approach_beside_the_direction_of_travel():
+    """Driving forward (in view) spends the budget of the bearings beside the view
+    (cos ψ of each step), undoes it driving back, builds at most F of credit, and a
+    bearing is zeroed only when its whole sector (β/2 − π/K) is in view."""
+    from fov_marl.control.safety import bearing_travel_reset, bearing_travel_step
+
+    K = 24  # 15° bins
+    yaw = np.array([0.0])
+    c = bearing_travel_step(np.zeros((1, K)), np.array([[1.0, 0.0]]), yaw, 0.2)
+    ang = 2.0 * math.pi * np.arange(K) / K
+    np.testing.assert_allclose(c[0], np.maximum(0.0, 0.2 * np.cos(ang)), atol=1e-12)
+    assert c[0, 2] == pytest.approx(0.2 * math.cos(math.radians(30.0)))  # beside a 45° view
+    back = bearing_travel_step(c, np.array([[-1.0, 0.0]]), yaw, 0.2, floor_m=0.5)
+    # forward then back: the bearings ahead are back at 0, those behind now approached
+    np.testing.assert_allclose(back[0], np.maximum(0.0, -0.2 * np.cos(ang)), atol=1e-12)
+    away = np.zeros((1, K))
+    for _ in range(10):  # 2 m away from bearing 0
+        away = bearing_travel_step(away, np.array([[-1.0, 0.0]]), yaw, 0.2, floor_m=0.5)
+    assert away[0, 0] == pytest.approx(-0.5)  # at most F of credit
+    fov = math.radians(45.0)
+    seen = bearing_travel_reset(np.ones((1, K)), yaw, fov, math.pi / K)
+    # |bearing| <= 22.5° - 7.5° = 15°: bins 0°, ±15° only
+    assert set(np.flatnonzero(seen[0] == 0.0)) == {0, 1, K - 1}
+    turned = bearing_travel_reset(np.ones((1, K)), np.array([math.radians(30.0)]), fov, math.pi / K)
+    assert set(np.flatnonzero(turned[0] == 0.0)) == {1, 2, 3}  # world bearings 15-45°
+
+
+def test_bearing_travel_rows_bind_only_near_the_budget():
+    """Row k: n_k · v ≤ max(0, (B − c_k)/dt) in Σ_i, written only where B − c_k < v_max dt;
+    through team_safety_rows they replace the single vector's row."""
+    from fov_marl.control.safety import bearing_travel_rows, team_safety_rows
+
+    K, B = 24, 0.5
+    c = np.zeros((1, K))
+    c[0, 2] = 0.45  # world bearing 30°: 0.05 m left
+    c[0, 12] = 0.1  # far from spent: no row
+    yaw = np.array([math.radians(30.0)])  # bearing 2 is straight ahead in Σ_i
+    A, b, h = bearing_travel_rows(c, yaw, B, 0.2, 1.0)
+    assert np.isfinite(b).sum() == 1 and np.isfinite(b[0, 2])
+    np.testing.assert_allclose(A[0, 2], [-1.0, 0.0, 0.0], atol=1e-12)
+    assert b[0, 2] == pytest.approx(0.05 / 0.2) and h[0, 2] == pytest.approx(0.05)
+    c[0, 2] = 0.6  # overspent (one step): hold, never pushed back
+    _, b, _ = bearing_travel_rows(c, yaw, B, 0.2, 1.0)
+    assert b[0, 2] == 0.0
+    par = ControllerParams(blind_travel_m=B, blind_travel_bearings=K)
+    pose = np.array([[20.0, 20.0, yaw[0]]])
+    common = dict(
+        mean_body=np.zeros((1, 0, 2)),
+        cov_body=np.zeros((1, 0, 2, 2)),
+        detected=np.zeros((1, 0), dtype=bool),
+        pose_world=pose,
+        blind_travel_body=np.array([[0.0, 0.49]]),  # ignored with the per-bearing budget
+    )
+    rows = team_safety_rows(CFG, par, bearing_travel_m=c, **common)
+    A, b, kind = rows.robot(0)
+    budget = (kind == ROW_BLIND) & (b == 0.0)
+    assert budget.sum() == 1 and np.allclose(A[budget][0], [-1.0, 0.0, 0.0])
+    vec = team_safety_rows(CFG, ControllerParams(blind_travel_m=B), bearing_travel_m=c, **common)
+    A, b, kind = vec.robot(0)
+    assert (kind == ROW_BLIND).sum() == 1 and np.allclose(A[kind == ROW_BLIND][0], [0, -1, 0])
+
+
+def test_blind_travel_bearings_validated():
+    for bad in (1, 3, -1, 361, 2.5, True):
+        with pytest.raises(ValueError, match="blind_travel_bearings"):
+            ControllerParams(blind_travel_bearings=bad)
+    assert ControllerParams(blind_travel_bearings=4).blind_travel_bearings == 4
+
+
 # ------------------------------------------------------------- the bearing cone (1b)
 def _spd(rng, scale):
     L = rng.normal(size=(2, 2)) * scale

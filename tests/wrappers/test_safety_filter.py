@@ -177,10 +177,10 @@ def test_head_on_pair_neither_collides_nor_breaks_ds(fov):
 def test_filter_changes_few_harmless_random_actions():
     """Random actions, N = 6, β = 120°, robots spread in the arena: the filter steps in
     only where a neighbour (seen, or believed) or a wall is near. The first version's
-    blanket motion cone changed 96% of them. Measured here: 51% with the shipped 0.5 m
-    blind travel budget, 43% with the earlier 1 m. The issue's goal of 30% is not met:
-    the blind rows bound the speed towards the nearest particle of a belief, see the
-    wrapper's docstring."""
+    blanket motion cone changed 96% of them. Measured here: 67% with the shipped 0.5 m
+    blind travel budget per bearing (safety Section 2e), 50% with the single vector's,
+    43% with the earlier 1 m (over seeds 10-14 x 300 steps: 75% against 73%). The issue's goal of 30% is not met: the blind rows bound
+    the speed towards the nearest particle of a belief, see the wrapper's docstring."""
     env = SafetyFilterWrapper(fov_coverage_v0.parallel_env(n_agents=6, fov_deg=120.0))
     rng = np.random.default_rng(0)
     changed = total = 0
@@ -191,7 +191,7 @@ def test_filter_changes_few_harmless_random_actions():
             _, _, _, _, infos = env.step(acts)
             changed += sum(bool(safety_of(i)["intervened"]) for i in infos.values())
             total += len(infos)
-    assert changed / total <= 0.55, changed / total
+    assert changed / total <= 0.7, changed / total
 
 
 def test_commanded_velocity_is_the_one_the_robot_gets_at_a_wall():
@@ -201,7 +201,12 @@ def test_commanded_velocity_is_the_one_the_robot_gets_at_a_wall():
     from fov_marl.spaces import action_to_velocity
 
     poses = np.array([[20.0, 38.5, 0.0], [5.0, 5.0, 0.0]])
-    env = SafetyFilterWrapper(fov_coverage_v0.parallel_env(n_agents=2, initial_poses=poses))
+    # no blind travel budget: with it the robot stops after ~0.4 m to look at the bearings
+    # beside its way (toward the wall, where a neighbour 1.15 m off could hide)
+    env = SafetyFilterWrapper(
+        fov_coverage_v0.parallel_env(n_agents=2, initial_poses=poses),
+        controller_params={"blind_travel_m": 0.0},
+    )
     env.reset(seed=0)
     cfg = env.config
     for _ in range(40):
