@@ -15,7 +15,8 @@ from fov_marl.evaluation import run_episode
 from fov_marl.infos import safety_of
 
 #: the filter before the bearing cone, the fallback's tie rule and straight steps, the arc
-#: guard and the blind travel budget per bearing: the counterfactuals below run on the
+#: guard, the hold clean-up and the blind travel budget per bearing: the counterfactuals
+#: below run on the
 #: filter their episodes were found with (these changes send the episodes on other courses
 #: that stay clear even without the rows they test)
 _BEFORE_CONE = {
@@ -23,6 +24,7 @@ _BEFORE_CONE = {
     "fallback_tie_mps": 0.0,
     "fallback_straight": False,
     "arc_yaw_guard": False,
+    "hold_cleanup": False,
     "blind_travel_bearings": 0,
 }
 
@@ -161,7 +163,9 @@ def test_filter_packed_wall_start_dips_without_the_bearing_cone():
 
     ep = run_stress_episode(StressCase("spin_charge", 12, 360.0, "wall"), 1001, 300)
     assert ep["min_distance_m"] >= 1.1 - 1e-6, ep
-    cp = {"bearing_cone_max_deg": 0.0}
+    # on the filter it was found with: before the arc guard and the budget per bearing,
+    # either of which also keeps this episode at 1.1 m without the cone
+    cp = {"bearing_cone_max_deg": 0.0, "arc_yaw_guard": False, "blind_travel_bearings": 0}
     off = StressCase("spin_charge", 12, 360.0, "wall", filter_kwargs={"controller_params": cp})
     assert run_stress_episode(off, 1001, 300)["min_distance_m"] < 1.099
 
@@ -185,21 +189,19 @@ def test_filter_packed_wall_start_no_dip_on_the_arc(guard):
 
 
 @pytest.mark.parametrize("cleanup", [True, False])
-def test_filter_packed_wall_start_no_creep_within_the_tolerance(cleanup, monkeypatch):
+def test_filter_packed_wall_start_no_creep_within_the_tolerance(cleanup):
     """wait_charge, N = 4, β = 120°, wall start, seed 1101 (the packed-start sweep's closest
     pair after the arc guard, 1.099874 m): a robot's cascade met its rows within its
     tolerance (κ* 6e-4, status "solved") and backed at 0.6 mm/s into an unseen neighbour
     1.1 m behind it. With the hold clean-up (``controller.hold_cleanup``) no pair gets
-    closer than it started; without it (the check switched off here) the creep is back."""
-    import fov_marl.control.controller as ctl
+    closer than it started; without it (``hold_cleanup=False``) the creep is back."""
     from fov_marl.stress import StressCase, run_stress_episode
 
     fk = {}
     if not cleanup:
-        monkeypatch.setattr(ctl, "approaches_held_row", lambda u, *a: np.zeros(len(u), bool))
         # found on the single-vector travel budget; the per-bearing one (safety Section
         # 2e) happens to stop this creep as well
-        fk = {"controller_params": {"blind_travel_bearings": 0}}
+        fk = {"controller_params": {"hold_cleanup": False, "blind_travel_bearings": 0}}
     case = StressCase("wait_charge", 4, 120.0, "wall", filter_kwargs=fk)
     ep = run_stress_episode(case, 1101, 300)
     assert ep["collisions"] == 0, ep

@@ -460,7 +460,7 @@ class BatchedFovCbfController:
             cone_v[qi] = kq[:, M * 4 : n_fov_slots].max(axis=1, initial=0.0)
             if K:
                 sf = (n_s[qi] > 0) & ((safety_kappa[qi] > _KAPPA_SAFETY) | (qres.status == _FAIL))
-                creep = ~sf & (n_s[qi] > 0)
+                creep = ~sf & (n_s[qi] > 0) & p.hold_cleanup
                 creep &= approaches_held_row(qres.u, sA[qi], sb[qi], skeep[qi])
                 for c in np.flatnonzero(creep):  # rare: robot by robot, as the loop does
                     r, kk = qi[c], skeep[qi[c]]

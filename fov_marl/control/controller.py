@@ -719,6 +719,7 @@ class FovCbfController:
         unmet = safety_kappa > _KAPPA_SAFETY or qres.status == "qp_failed"
         if (
             sb.size
+            and p.hold_cleanup
             and not unmet
             and approaches_held_row(u[None], sA[None], sb[None], np.ones((1, sb.size), bool))[0]
         ):  # a creep towards a held row, within the cascade's tolerance

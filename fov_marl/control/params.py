@@ -150,6 +150,13 @@ field                        default   source / reason
                                        straight step does (:mod:`~fov_marl.control.
                                        safety` Section 1c; without it a packed pair
                                        creeping while turning closed 1.1 to 1.098 m)
+``hold_cleanup``             True      an output that approaches a held collision row
+                                       (b ≤ 0) within the cascade's tolerance is moved
+                                       to the nearest input that approaches none
+                                       (:func:`~fov_marl.control.controller.
+                                       hold_cleanup`), else the safe fallback; off
+                                       is an ablation (a packed robot crept 0.13 mm
+                                       into an unseen neighbour)
 ``lost_fov_yield``           True      the FoV levels of neighbours the camera does not
                                        report yield when they stall the robot
                                        (:meth:`~fov_marl.control.controller.
@@ -323,6 +330,8 @@ class ControllerParams:
             retreats is straight (ω = 0).
         arc_yaw_guard: limit the output's yaw rate so the step's arc approaches no
             held line of sight (:func:`~fov_marl.control.safety.arc_yaw_guard`).
+        hold_cleanup: correct an output creeping towards a held collision row within
+            the cascade's tolerance (:func:`~fov_marl.control.controller.hold_cleanup`).
         lost_fov_yield: when the robot is stalled (less than a fifth of u*'s
             translation kept), solve again without the FoV rows of undetected
             neighbours and use that solution if it is much closer to u*.
@@ -392,6 +401,7 @@ class ControllerParams:
     fallback_tie_mps: float = 0.25
     fallback_straight: bool = True
     arc_yaw_guard: bool = True
+    hold_cleanup: bool = True
     walls: bool = True
     wall_gain: float = 2.5
     deadlock_turn_deg: float = 60.0
@@ -446,6 +456,7 @@ class ControllerParams:
             "lost_fov_yield",
             "fallback_straight",
             "arc_yaw_guard",
+            "hold_cleanup",
         ):
             _check_bool(name, getattr(self, name))
         _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)
