@@ -48,7 +48,18 @@ representative small subset (``full=False``); :func:`format_stress_table` prints
 rows; :func:`add_stress_parser` / :func:`cmd_stress` are the ``fov-marl stress``
 command (``python -m fov_marl.stress`` runs it standalone).
 
-Measured on the whole grid, one episode per case (commit 8d9d0bb, ``fov-marl stress
+Measured on the whole grid, one episode per case, after the blind travel budget per
+bearing (commit cab1192, ``fov-marl stress --full --episodes 1 --seed 7000 --workers 2``,
+29 min on 2 cores): 0 collision events in every case; no pair closer than its 1.1 m
+packed start (min 1.1000 m); from random starts no D_s violation (min 2.26 m; by β
+2.48 / 2.33 / 2.30 / 2.26 m at 45/90/120/360°) and none from ``head_on_pair`` (min
+2.12 m). D_s was broken in 504 cases (8,388 events), all from starts inside D_s.
+Robot-steps changed: 0.97 over all adversaries (0.94 from random starts; 0.995 / 0.993
+/ 0.989 / 0.912 by β). Safe fallback: 0.089 of robot-steps from random starts. The
+filter's own chatter: median 0.018 per robot-step, up to 0.126 at N = 24, β = 360°,
+corner and clustered starts (packed, in the fallback; no budget rows exist at 360°).
+
+Before it (commit 8d9d0bb, ``fov-marl stress
 --full --episodes 1 --seed 7000 --workers 2``, 760 cases x 300 steps, 36 min on 2
 cores): 0 collision events in every case. Pairs never got closer than 1.098 m, against
 packed starts 1.1 m apart, so the known 2 mm dip below a packed start remains. D_s was
