@@ -588,10 +588,10 @@ class PfCbfPipeline:
             c = self._bearing_travel
             ang = bearing_angles_body(c.shape[1], self._own_pose[:, 2])
             appr = np.cos(ang) * u_star[:, 0:1] + np.sin(ang) * u_star[:, 1:2] > 0.0
-            k = np.argmax(np.where(appr, c, -1.0), axis=1)
-            r = np.where(appr[np.arange(len(k)), k], c[np.arange(len(k)), k], 0.0)
-            phi = ang[np.arange(len(k)), k]
-            look = r >= 0.75 * par.blind_travel_m
+            row = np.arange(c.shape[0])
+            k = np.argmax(np.where(appr, c, -1.0), axis=1)  # the most-spent approached
+            look = appr[row, k] & (c[row, k] >= 0.75 * par.blind_travel_m)
+            phi = ang[row, k]
         else:
             e = self._blind_travel_body()
             r = np.hypot(e[:, 0], e[:, 1])
