@@ -413,18 +413,20 @@ class PfCbfPipeline:
         """:meth:`observe` for every copy: ``obs (B, N, D)``, ``poses_world (B, N, 3)``."""
         obs_m = self._obs_rows(obs)
         self._read_cues(obs_m)
-        self._blind_travel_world = blind_travel_reset(
-            self._blind_travel_world,
-            self._own_pose[:, 2],
-            self.config.fov_rad,
-            math.radians(_LOOK_MARGIN_DEG),
-        )
-        self._bearing_travel = bearing_travel_reset(
-            self._bearing_travel,
-            self._own_pose[:, 2],
-            self.config.fov_rad,
-            math.pi / max(self._bearing_travel.shape[1], 1),  # the bin's whole sector
-        )
+        if self._bearing_travel.shape[1]:  # one budget kept: per bearing (Section 2e) ...
+            self._bearing_travel = bearing_travel_reset(
+                self._bearing_travel,
+                self._own_pose[:, 2],
+                self.config.fov_rad,
+                math.pi / self._bearing_travel.shape[1],  # the bin's whole sector
+            )
+        else:  # ... or the single vector (Section 2d)
+            self._blind_travel_world = blind_travel_reset(
+                self._blind_travel_world,
+                self._own_pose[:, 2],
+                self.config.fov_rad,
+                math.radians(_LOOK_MARGIN_DEG),
+            )
         self.last_timings = {}
         if self.estimates == "tracker" and self.bank is not None:
             t0 = time.perf_counter()
@@ -699,13 +701,6 @@ class PfCbfPipeline:
         self._applied = act
         if self.estimates == "tracker":
             v = act[:, :2].astype(np.float64) * cfg.v_max_mps
-            self._blind_travel_world = blind_travel_step(
-                self._blind_travel_world,
-                v,
-                self._own_pose[:, 2],
-                cfg.dt_s,
-                self.controller_params.blind_travel_memory_s,
-            )
             if self._bearing_travel.shape[1]:
                 self._bearing_travel = bearing_travel_step(
                     self._bearing_travel,
@@ -715,5 +710,13 @@ class PfCbfPipeline:
                     self.controller_params.blind_travel_memory_s,
                     floor_m=self.controller_params.blind_travel_m,
                     omega_radps=act[:, 2].astype(np.float64) * cfg.omega_max_radps,
+                )
+            else:
+                self._blind_travel_world = blind_travel_step(
+                    self._blind_travel_world,
+                    v,
+                    self._own_pose[:, 2],
+                    cfg.dt_s,
+                    self.controller_params.blind_travel_memory_s,
                 )
         return act

@@ -221,7 +221,7 @@ def test_filter_narrow_view_edge_regression(bearings):
     budget was zeroed every step) in bursts towards a neighbour parked 2.08 m away at
     −34° to −38°, unseen for 40 s, and closed to 1.41 m: 0.67 m of blind approach on a
     0.5 m budget. With the budget per bearing (safety Section 2e, the shipped 24
-    bearings) it keeps 2.52 m; the single vector is kept here as the counterfactual."""
+    bearings) it keeps 2.54 m; the single vector is kept here as the counterfactual."""
     from fov_marl.stress import StressCase, run_stress_episode
 
     fk = {"controller_params": {"blind_travel_bearings": bearings}}

@@ -98,7 +98,7 @@ another course on which a robot drove forward, in view, towards a neighbour park
 2.08 m away at −34° to −38°: every forward step zeroed the budget along its way, and it
 closed to 1.41 m. The budget is therefore kept per bearing (``blind_travel_bearings =
 24``, safety Section 2e): no bearing the robot has not had in view is approached by more
-than 0.5 m; the episode keeps 2.52 m. The 0.5 m (on the single vector) cost little: random actions (N = 6, 120°,
+than 0.5 m; the episode keeps 2.54 m. The 0.5 m (on the single vector) cost little: random actions (N = 6, 120°,
 2 x 300 steps) are changed in 70% of the robot-steps against 67% (51% against 43% over
 2 x 150 steps), and the learned
 policy's final η behind the filter (seeds 0-3) is unchanged within noise. The
