@@ -343,3 +343,24 @@ def test_direct_nnls_gives_the_public_functions_bits(seed, m):
 def test_least_distance_rejects_non_finite_data():
     with pytest.raises(ValueError, match="finite"):
         least_distance(np.array([[1.0, np.nan]]), np.array([0.5]))
+
+
+@given(st.integers(0, 10_000), st.integers(0, 50), st.integers(0, 12))
+def test_duplicate_rows_screen_matches_the_dense_comparison(seed, R, n_copies):
+    """The screened duplicate test marks exactly the rows the dense ``(R, R, 4)``
+    comparison marks, on rows with repeats, near-repeats (inside and just outside the
+    tolerance) and ties in single coefficients (b = 0, shared columns), as the cascade's
+    rows have."""
+    from fov_marl.control.qp import _DUP_TOL, _duplicate_rows_dense, duplicate_rows
+
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(R, 3)).round(int(rng.integers(0, 3)))
+    b = rng.choice([0.0, -0.8, 0.3], size=R) if rng.random() < 0.5 else rng.normal(size=R)
+    if R:
+        src = rng.integers(0, R, n_copies)
+        step = rng.choice([0.0, 0.5 * _DUP_TOL, 0.99 * _DUP_TOL, 1.01 * _DUP_TOL, 3 * _DUP_TOL])
+        A = np.vstack([A, A[src] + step * rng.choice([-1.0, 1.0], (n_copies, 3))])
+        b = np.concatenate([b, b[src] + step * rng.choice([-1.0, 1.0], n_copies)])
+        perm = rng.permutation(b.size)
+        A, b = A[perm], b[perm]
+    assert np.array_equal(duplicate_rows(A, b), _duplicate_rows_dense(A, b))
