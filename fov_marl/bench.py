@@ -341,7 +341,7 @@ def bench_batched_filter(
     from fov_marl.estimation import TrackerParams
     from fov_marl.pipeline import PfCbfPipeline
     from fov_marl.spaces import action_to_velocity
-    from fov_marl.wrappers.safety_filter import FILTER_CONTROLLER_DEFAULTS, FILTER_TRACKER_DEFAULTS
+    from fov_marl.wrappers.safety_filter import FILTER_TRACKER_DEFAULTS, filter_controller_defaults
 
     if scenario not in ("coverage", "crossing"):
         raise ValueError(f"scenario must be 'coverage' or 'crossing', got {scenario!r}")
@@ -350,7 +350,10 @@ def bench_batched_filter(
     mod = fov_coverage_v0 if scenario == "coverage" else fov_crossing_v0
     if policy == "filter":
         tp = TrackerParams(**FILTER_TRACKER_DEFAULTS)
-        cp = ControllerParams(**FILTER_CONTROLLER_DEFAULTS)
+        # the wrapper's defaults for this env (the budget's bearings depend on β)
+        cp = ControllerParams(
+            **filter_controller_defaults(mod.parallel_env(n_agents=n_agents).unwrapped.config)
+        )
     else:
         tp, cp = TrackerParams(), ControllerParams()
     if tracker_overrides:

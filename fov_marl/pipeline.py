@@ -79,6 +79,7 @@ Controller = Literal["auto", "batched", "loop"]
 _FOV_ROW_COLS = np.array([k for k in range(4) if k != SAFETY_ROW])
 #: the blind travel is forgotten once its direction is this far inside the view (degrees)
 _LOOK_MARGIN_DEG = 10.0
+_LOOK_FRACTION = 0.75
 #: ``controller="auto"`` uses the batched controller from this many env copies on. For one
 #: team the per-robot loop is as fast (measured, CPU ms per robot-step, recorded pfcbf
 #: steps: N = 6 0.31 batched / 0.31 loop, N = 8 0.25 / 0.32, N = 12 0.38 / 0.41, N = 24
@@ -592,7 +593,7 @@ class PfCbfPipeline:
             appr = np.cos(ang) * u_star[:, 0:1] + np.sin(ang) * u_star[:, 1:2] > 0.0
             row = np.arange(c.shape[0])
             k = np.argmax(np.where(appr, c, -1.0), axis=1)  # the most-spent approached
-            look = appr[row, k] & (c[row, k] >= 0.75 * par.blind_travel_m)
+            look = appr[row, k] & (c[row, k] >= _LOOK_FRACTION * par.blind_travel_m)
             phi = ang[row, k]
         else:
             e = self._blind_travel_body()

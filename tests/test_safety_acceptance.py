@@ -312,13 +312,14 @@ def test_filter_no_bearing_is_approached_blind_beyond_the_budget(adversary, fov_
         fov_coverage_v0.parallel_env(
             n_agents=n, fov_deg=fov_deg, initial_poses=poses, max_cycles=steps
         ),
-        controller_params={"blind_travel_memory_s": 1e6},
+        # per bearing at every β here (the wrapper's default keeps the vector from 97.2° on)
+        controller_params={"blind_travel_memory_s": 1e6, "blind_travel_bearings": 24},
     )
     adv = make_adversary(adversary, env)
     obs, _ = env.reset(seed=5)
     adv.reset(seed=6)
     B = FILTER_CONTROLLER_DEFAULTS["blind_travel_m"]
-    K = FILTER_CONTROLLER_DEFAULTS["blind_travel_bearings"]
+    K = env.pipeline.controller_params.blind_travel_bearings
     bound = B + cfg.v_max_mps * cfg.dt_s
     bound += arc_margin(cfg.v_max_mps, cfg.omega_max_radps, cfg.dt_s) + 1e-6
     psi = 2.0 * math.pi * np.arange(K) / K

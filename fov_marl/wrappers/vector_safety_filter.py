@@ -45,7 +45,7 @@ from fov_marl.estimation import TrackerParams
 from fov_marl.pipeline import PfCbfPipeline
 from fov_marl.spaces import action_to_velocity
 from fov_marl.validation import check_params
-from fov_marl.wrappers.safety_filter import FILTER_CONTROLLER_DEFAULTS, FILTER_TRACKER_DEFAULTS
+from fov_marl.wrappers.safety_filter import FILTER_TRACKER_DEFAULTS, filter_controller_defaults
 
 __all__ = ["VectorSafetyFilterWrapper"]
 
@@ -84,7 +84,10 @@ class VectorSafetyFilterWrapper:
             "tracker_params", tracker_params, TrackerParams, FILTER_TRACKER_DEFAULTS
         )
         controller_params = check_params(
-            "controller_params", controller_params, ControllerParams, FILTER_CONTROLLER_DEFAULTS
+            "controller_params",
+            controller_params,
+            ControllerParams,
+            filter_controller_defaults(venv.config, controller_params),
         )
         self.venv = venv
         self.config = venv.config

@@ -123,7 +123,7 @@ def test_filter_controller_defaults_and_overrides():
     not add behaviour to the policy's); dict overrides keep it, a dataclass is used as given."""
     base = fov_coverage_v0.parallel_env(n_agents=3)
     prm = SafetyFilterWrapper(base).pipeline.controller_params
-    assert prm == ControllerParams(**FILTER_CONTROLLER_DEFAULTS)
+    assert prm == ControllerParams(**{**FILTER_CONTROLLER_DEFAULTS, "blind_travel_bearings": 0})
     assert prm.deadlock_turn_deg == 0.0 and not prm.motion_cone
     assert prm.safety_model == "ellipse" and prm.walls
     over = SafetyFilterWrapper(base, controller_params={"blind_speed_mps": 0.1})
@@ -228,3 +228,29 @@ def test_filter_on_crossing_env():
     for _ in range(5):
         obs, *_ = env.step({a: np.zeros(3) for a in env.agents})
     assert set(obs) == set(env.possible_agents)
+
+
+@pytest.mark.parametrize(
+    "fov_deg, bearings", [(45.0, 24), (90.0, 24), (97.0, 24), (97.5, 0), (120.0, 0), (360.0, 0)]
+)
+def test_blind_travel_budget_is_per_bearing_below_the_fov_limit(fov_deg, bearings):
+    """The budget is kept per bearing below β* = 2 asin((D_s − B)/D_s) = 97.18° (D_s = 2 m,
+    B = 0.5 m) and as the single vector from it on, in both wrappers; an explicit
+    ``blind_travel_bearings`` wins, a larger B lowers β*, and a dataclass is used as given."""
+    from fov_marl.wrappers import VectorSafetyFilterWrapper
+    from fov_marl.wrappers.safety_filter import per_bearing_fov_limit_deg
+
+    assert per_bearing_fov_limit_deg(2.0, 0.5) == pytest.approx(97.1808, abs=1e-4)
+    assert per_bearing_fov_limit_deg(2.0, 2.0) == 0.0
+    env = fov_coverage_v0.parallel_env(n_agents=3, fov_deg=fov_deg)
+    assert SafetyFilterWrapper(env).pipeline.controller_params.blind_travel_bearings == bearings
+    venv = fov_coverage_v0.vector_env(num_envs=2, n_agents=3, fov_deg=fov_deg)
+    assert (
+        VectorSafetyFilterWrapper(venv).pipeline.controller_params.blind_travel_bearings == bearings
+    )
+    forced = SafetyFilterWrapper(env, controller_params={"blind_travel_bearings": 36})
+    assert forced.pipeline.controller_params.blind_travel_bearings == 36
+    wide_b = SafetyFilterWrapper(env, controller_params={"blind_travel_m": 1.5})  # β* = 29.0°
+    assert wide_b.pipeline.controller_params.blind_travel_bearings == (24 if fov_deg < 28.9 else 0)
+    given = ControllerParams(blind_travel_m=0.5, blind_travel_bearings=12)
+    assert SafetyFilterWrapper(env, controller_params=given).pipeline.controller_params is given
