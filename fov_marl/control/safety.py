@@ -766,11 +766,15 @@ def bearing_travel_reset(
 ) -> np.ndarray:
     """Zero ``c_k`` for the bearings in the camera's view (within ``β/2 − margin``, 1e-9
     rad of round-off included: a bin whose sector ends on the view's edge is in view).
+    A 360° camera has no edge: every bearing is in view (the margin would otherwise leave
+    the bins within ``margin`` of straight behind unseen for good).
 
     Args:
         c_m: ``(R, K)`` (m). yaw_rad: ``(R,)``. fov_rad: β. margin_rad: inward margin.
     """
     c = np.asarray(c_m, dtype=np.float64)
+    if fov_rad >= 2.0 * math.pi:
+        return np.zeros_like(c)
     seen = np.abs(bearing_angles_body(c.shape[1], yaw_rad)) <= 0.5 * fov_rad - margin_rad + 1e-9
     return np.where(seen, 0.0, c)
 

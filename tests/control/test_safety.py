@@ -600,6 +600,10 @@ def test_bearing_travel_counts_the_approach_beside_the_direction_of_travel():
     assert set(np.flatnonzero(seen[0] == 0.0)) == {0, 1, K - 1}
     turned = bearing_travel_reset(np.ones((1, K)), np.array([math.radians(30.0)]), fov, math.pi / K)
     assert set(np.flatnonzero(turned[0] == 0.0)) == {1, 2, 3}  # world bearings 15-45°
+    # a 360° camera sees every bearing, straight behind included (no edge, no margin)
+    assert not bearing_travel_reset(np.ones((2, K)), np.array([0.0, 2.0]), 2 * math.pi, 0.1).any()
+    near = bearing_travel_reset(np.ones((1, K)), yaw, math.radians(359.0), math.pi / K)
+    assert set(np.flatnonzero(near[0] != 0.0)) == {K // 2}  # 359°: the bin behind is not
 
 
 def test_bearing_travel_rows_bind_only_near_the_budget():
