@@ -77,8 +77,7 @@ Estimates = Literal["tracker", "oracle"]
 Controller = Literal["auto", "batched", "loop"]
 #: the FoV rows (left, right, range) among each neighbour's four rows
 _FOV_ROW_COLS = np.array([k for k in range(4) if k != SAFETY_ROW])
-#: the blind travel is forgotten once its direction is this far inside the view (degrees)
-_LOOK_MARGIN_DEG = 10.0
+#: look-before-leap turns a robot once its budget is this spent (fraction of B)
 _LOOK_FRACTION = 0.75
 #: ``controller="auto"`` uses the batched controller from this many env copies on. For one
 #: team the per-robot loop is as fast (measured, CPU ms per robot-step, recorded pfcbf
@@ -426,7 +425,7 @@ class PfCbfPipeline:
                 self._blind_travel_world,
                 self._own_pose[:, 2],
                 self.config.fov_rad,
-                math.radians(_LOOK_MARGIN_DEG),
+                math.radians(self.controller_params.blind_travel_view_deg),
             )
         self.last_timings = {}
         if self.estimates == "tracker" and self.bank is not None:

@@ -94,6 +94,11 @@ field                        default   source / reason
                                        1.0 m; pfcbf in crossing 0)
 ``blind_travel_memory_s``    30.0      T: time constant (s) of the leak of the blind
                                        travel (jitter is forgiven, persistence is not)
+``blind_travel_view_deg``    10.0      with the single vector: its travel is forgotten
+                                       once its net direction lies this far inside the
+                                       view (degrees); the safety filter uses
+                                       asin(2 r / D_s) = 30° (a static point outside the
+                                       view is then passed at ≥ 2 r)
 ``blind_travel_bearings``    0         K_b: 0 keeps one net-displacement vector
                                        (Section 2d); K_b > 0 budgets the approach
                                        towards K_b world bearings, each reset only
@@ -312,6 +317,8 @@ class ControllerParams:
         last_seen_max_age_s: age (s) after which a last-seen point is released, (0, 1e6].
         blind_travel_m: B in [0, 100] (m), the blind travel budget; 0 disables.
         blind_travel_memory_s: T in (0, 1e6] (s), the leak of the blind travel.
+        blind_travel_view_deg: inward margin of the view in [0, 90] (degrees) within which
+            the single vector's net travel counts as looked at (Section 2d).
         blind_travel_bearings: K_b in {0} ∪ [4, 360], world bearings of the blind travel
             budget (0: the single net-displacement vector).
         walls: add the arena walls as rows.
@@ -394,6 +401,7 @@ class ControllerParams:
     last_seen_max_age_s: float = 1e6
     blind_travel_m: float = 0.0
     blind_travel_memory_s: float = 30.0
+    blind_travel_view_deg: float = 10.0
     blind_travel_bearings: int = 0
     lost_sigma_max_m: float = math.inf
     undetected_quantile: str = "gaussian"
@@ -481,6 +489,7 @@ class ControllerParams:
         _check("responsibility", self.responsibility, 0.0, 1.0, lo_open=True)
         _check("safety_hold_band_m", self.safety_hold_band_m, 0.0, 10.0)
         _check_int("blind_bins", self.blind_bins, 0, 360)
+        _check("blind_travel_view_deg", self.blind_travel_view_deg, 0.0, 90.0)
         _check_int("blind_travel_bearings", self.blind_travel_bearings, 0, 360)
         if 0 < self.blind_travel_bearings < 4:
             raise ConfigError(

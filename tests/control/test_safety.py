@@ -646,6 +646,26 @@ def test_blind_travel_bearings_validated():
         with pytest.raises(ValueError, match="blind_travel_bearings"):
             ControllerParams(blind_travel_bearings=bad)
     assert ControllerParams(blind_travel_bearings=4).blind_travel_bearings == 4
+    for bad in (-1.0, 90.5, float("nan"), "10"):
+        with pytest.raises(ValueError, match="blind_travel_view_deg"):
+            ControllerParams(blind_travel_view_deg=bad)
+    assert ControllerParams(blind_travel_view_deg=90.0).blind_travel_view_deg == 90.0
+
+
+def test_blind_travel_vector_forgets_travel_only_inside_its_view_margin():
+    """The single vector resets where its direction is within β/2 − margin of the heading:
+    with the filter's 30° at β = 120°, net travel 35° off the heading is kept (it could
+    approach a point just outside the view at cos 25°), 25° off it is forgotten."""
+    from fov_marl.control.safety import blind_travel_reset
+
+    e = np.array([[math.cos(math.radians(35.0)), math.sin(math.radians(35.0))],
+                  [math.cos(math.radians(25.0)), -math.sin(math.radians(25.0))]])  # fmt: skip
+    yaw = np.zeros(2)
+    kept = blind_travel_reset(e, yaw, math.radians(120.0), math.radians(30.0))
+    np.testing.assert_array_equal(kept[0], e[0])
+    np.testing.assert_array_equal(kept[1], [0.0, 0.0])
+    pfcbf = blind_travel_reset(e, yaw, math.radians(120.0), math.radians(10.0))
+    assert not pfcbf.any()  # 10°: both forgotten
 
 
 # ------------------------------------------------------------- the bearing cone (1b)

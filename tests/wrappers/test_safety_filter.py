@@ -123,7 +123,8 @@ def test_filter_controller_defaults_and_overrides():
     not add behaviour to the policy's); dict overrides keep it, a dataclass is used as given."""
     base = fov_coverage_v0.parallel_env(n_agents=3)
     prm = SafetyFilterWrapper(base).pipeline.controller_params
-    assert prm == ControllerParams(**{**FILTER_CONTROLLER_DEFAULTS, "blind_travel_bearings": 0})
+    vec = {"blind_travel_bearings": 0, "blind_travel_view_deg": prm.blind_travel_view_deg}
+    assert prm == ControllerParams(**{**FILTER_CONTROLLER_DEFAULTS, **vec})
     assert prm.deadlock_turn_deg == 0.0 and not prm.motion_cone
     assert prm.safety_model == "ellipse" and prm.walls
     over = SafetyFilterWrapper(base, controller_params={"blind_speed_mps": 0.1})
@@ -243,7 +244,12 @@ def test_blind_travel_budget_is_per_bearing_below_the_fov_limit(fov_deg, bearing
     assert per_bearing_fov_limit_deg(2.0, 0.5) == pytest.approx(97.1808, abs=1e-4)
     assert per_bearing_fov_limit_deg(2.0, 2.0) == 0.0
     env = fov_coverage_v0.parallel_env(n_agents=3, fov_deg=fov_deg)
-    assert SafetyFilterWrapper(env).pipeline.controller_params.blind_travel_bearings == bearings
+    prm = SafetyFilterWrapper(env).pipeline.controller_params
+    assert prm.blind_travel_bearings == bearings
+    # the vector forgets travel only 30° = asin(2 r / D_s) inside the view (pfcbf: 10°)
+    assert prm.blind_travel_view_deg == pytest.approx(10.0 if bearings else 30.0)
+    kept = SafetyFilterWrapper(env, controller_params={"blind_travel_view_deg": 12.0})
+    assert kept.pipeline.controller_params.blind_travel_view_deg == 12.0
     venv = fov_coverage_v0.vector_env(num_envs=2, n_agents=3, fov_deg=fov_deg)
     assert (
         VectorSafetyFilterWrapper(venv).pipeline.controller_params.blind_travel_bearings == bearings
