@@ -280,8 +280,12 @@ its heading at 120°, approached at 0.38 per metre, are never in view). Measured
 120° (N = 6, seeds 0-19, 1000 steps): pfcbf behind the filter reached the normalised
 threshold in 28.9 s (17 of 20 seeds) per bearing against 7.75 s (20 of 20) with the
 vector. Travel near the edge of a wide view towards a neighbour just outside it is the
-hole the vector leaves (crab-walking at β/2 − 10° approaches a point just beyond the
-edge at cos 10°); the rows on the beliefs (Sections 1-2) are what cover it there.
+hole the vector leaves when it forgets travel 10° inside the view (crab-walking at
+β/2 − 10° approaches a point just beyond the edge at cos 10°; measured, an adversary
+went from 1.55 to 1.12 m that way at 120°), so the filter's vector forgets travel only
+``asin(2 r / D_s)`` = 30° inside the view (``blind_travel_view_deg``,
+:func:`fov_marl.wrappers.safety_filter.vector_view_margin_deg`): a static point outside
+the view and at least D_s away is then passed at no less than 2 r.
 ``pfcbf`` keeps the vector, whose acceptance sweeps were measured with it.
 
 3. Walls
