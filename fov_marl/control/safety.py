@@ -707,12 +707,16 @@ def blind_travel_reset(
     e_world: np.ndarray, yaw_rad: np.ndarray, fov_rad: float, margin_rad: float
 ) -> np.ndarray:
     """Zero ``e`` where its direction lies in the camera's view (within ``β/2 − margin``).
+    A 360° camera has no edge: ``e`` is always zeroed (the margin would otherwise count
+    travel straight backwards as blind and turn the robot round for nothing).
 
     Args:
         e_world: ``(R, 2)`` (m, world frame). yaw_rad: ``(R,)``.
         fov_rad: β. margin_rad: inward angular margin (rad).
     """
     e = np.asarray(e_world, dtype=np.float64)
+    if fov_rad >= 2.0 * math.pi:
+        return np.zeros_like(e)
     bearing = np.arctan2(e[:, 1], e[:, 0]) - np.asarray(yaw_rad, dtype=np.float64)
     bearing = (bearing + math.pi) % (2.0 * math.pi) - math.pi
     seen = np.abs(bearing) <= 0.5 * fov_rad - margin_rad

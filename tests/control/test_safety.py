@@ -666,6 +666,12 @@ def test_blind_travel_vector_forgets_travel_only_inside_its_view_margin():
     np.testing.assert_array_equal(kept[1], [0.0, 0.0])
     pfcbf = blind_travel_reset(e, yaw, math.radians(120.0), math.radians(10.0))
     assert not pfcbf.any()  # 10°: both forgotten
+    # 360°: no edge, travel straight backwards is in view too
+    back = np.array([[-1.0, 0.0], [-1.0, 0.01]])
+    assert not blind_travel_reset(back, yaw, 2 * math.pi, math.radians(30.0)).any()
+    assert np.array_equal(
+        blind_travel_reset(back, yaw, math.radians(359.0), math.radians(30.0)), back
+    )
 
 
 # ------------------------------------------------------------- the bearing cone (1b)
