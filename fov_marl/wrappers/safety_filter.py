@@ -195,7 +195,8 @@ def filter_controller_defaults(config: Any, overrides: Any = None) -> dict[str, 
     and it cost well-behaved policies most of their progress: measured, N = 6, β = 120°,
     seeds 0-19, 1000 steps, pfcbf behind the filter: final η 0.9703 and 28.9 s to the
     normalised threshold (17 of 20 reached it), 78% of robot-steps changed, against 0.9942,
-    7.75 s (20 of 20) and 40% with the vector (pfcbf alone: 0.9957, 7.03 s); the shipped
+    7.75 s (20 of 20) and 40% with the vector (0.9925, 8.61 s, 50% with its 30° view
+    margin, :func:`vector_view_margin_deg`; pfcbf alone: 0.9955, 7.14 s); the shipped
     learned policy 0.9749 and 44.9 s against 0.9930 and 16.9 s.
 
     Below β* the per-bearing budget is kept although it costs more still: it is what keeps
