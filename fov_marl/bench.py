@@ -336,12 +336,13 @@ def bench_batched_filter(
     """
     from dataclasses import replace
 
+    from fov_marl.config import make_config
     from fov_marl.control import ControllerParams
     from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
     from fov_marl.estimation import TrackerParams
     from fov_marl.pipeline import PfCbfPipeline
     from fov_marl.spaces import action_to_velocity
-    from fov_marl.wrappers.safety_filter import FILTER_TRACKER_DEFAULTS, filter_controller_defaults
+    from fov_marl.wrappers.safety_filter import FILTER_TRACKER_DEFAULTS, filter_controller_params
 
     if scenario not in ("coverage", "crossing"):
         raise ValueError(f"scenario must be 'coverage' or 'crossing', got {scenario!r}")
@@ -350,10 +351,8 @@ def bench_batched_filter(
     mod = fov_coverage_v0 if scenario == "coverage" else fov_crossing_v0
     if policy == "filter":
         tp = TrackerParams(**FILTER_TRACKER_DEFAULTS)
-        # the wrapper's defaults for this env (the budget's bearings depend on β)
-        cp = ControllerParams(
-            **filter_controller_defaults(mod.parallel_env(n_agents=n_agents).unwrapped.config)
-        )
+        # the wrapper's settings for this env (the budget's bearings depend on β)
+        cp = filter_controller_params(make_config(scenario=scenario, n_agents=n_agents), None)
     else:
         tp, cp = TrackerParams(), ControllerParams()
     if tracker_overrides:

@@ -146,6 +146,7 @@ __all__ = [
     "FILTER_CONTROLLER_DEFAULTS",
     "FILTER_TRACKER_DEFAULTS",
     "filter_controller_defaults",
+    "filter_controller_params",
     "per_bearing_fov_limit_deg",
     "vector_view_margin_deg",
 ]
@@ -229,6 +230,15 @@ def filter_controller_defaults(config: Any, overrides: Any = None) -> dict[str, 
     return out
 
 
+def filter_controller_params(config: Any, value: Any) -> ControllerParams:
+    """The filter's :class:`ControllerParams` for the env of ``config``: ``value`` (a
+    dataclass, used as given; a dict of overrides; or None) on top of
+    :func:`filter_controller_defaults` (one place for both wrappers)."""
+    return check_params(
+        "controller_params", value, ControllerParams, filter_controller_defaults(config, value)
+    )
+
+
 def vector_view_margin_deg(robot_radius_m: float, safety_distance_m: float) -> float:
     """``asin(2 r / D_s)`` in degrees (30° for r = 0.5 m, D_s = 2 m): the filter's
     ``blind_travel_view_deg``. The single budget vector forgets travel whose net direction
@@ -282,12 +292,7 @@ class SafetyFilterWrapper(BaseParallelWrapper):
         tracker_params = check_params(
             "tracker_params", tracker_params, TrackerParams, FILTER_TRACKER_DEFAULTS
         )
-        controller_params = check_params(
-            "controller_params",
-            controller_params,
-            ControllerParams,
-            filter_controller_defaults(base.config, controller_params),
-        )
+        controller_params = filter_controller_params(base.config, controller_params)
         n = base.config.n_agents
         if draw_robot is not None:
             check_int("draw_robot", draw_robot, 0, n - 1, note="or None")

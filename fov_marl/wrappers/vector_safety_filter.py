@@ -45,7 +45,7 @@ from fov_marl.estimation import TrackerParams
 from fov_marl.pipeline import PfCbfPipeline
 from fov_marl.spaces import action_to_velocity
 from fov_marl.validation import check_params
-from fov_marl.wrappers.safety_filter import FILTER_TRACKER_DEFAULTS, filter_controller_defaults
+from fov_marl.wrappers.safety_filter import FILTER_TRACKER_DEFAULTS, filter_controller_params
 
 __all__ = ["VectorSafetyFilterWrapper"]
 
@@ -83,12 +83,7 @@ class VectorSafetyFilterWrapper:
         tracker_params = check_params(
             "tracker_params", tracker_params, TrackerParams, FILTER_TRACKER_DEFAULTS
         )
-        controller_params = check_params(
-            "controller_params",
-            controller_params,
-            ControllerParams,
-            filter_controller_defaults(venv.config, controller_params),
-        )
+        controller_params = filter_controller_params(venv.config, controller_params)
         self.venv = venv
         self.config = venv.config
         self.num_envs = int(venv.num_envs)
