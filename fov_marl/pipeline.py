@@ -578,7 +578,8 @@ class PfCbfPipeline:
         Where ``‖e‖ ≥ ¾ B`` (:func:`fov_marl.control.safety.blind_travel_step`) and u*
         still translates along ``e``, u*'s yaw rate becomes ``sat(look_gain · φ_e)``,
         φ_e the bearing of ``e`` in Σ_i: the robot looks where it has been going, which
-        releases the budget (the FoV levels, above u*, keep priority). With the budget
+        releases the budget (the FoV levels, above u*, keep priority unless
+        ``look_yields_fov``: then :meth:`filter` leaves them out of that step). With the budget
         per bearing (``blind_travel_bearings > 0``, Section 2e) ``e`` is the most-spent
         bearing ``c_k n_k`` among those u* approaches. Returns u* unchanged otherwise
         (and for the oracle, or with the budget disabled).
@@ -625,6 +626,7 @@ class PfCbfPipeline:
         u_nominal = u_star
         u_star = self._look_before_leap(u_star)
         looked = u_star[:, 2] != u_nominal[:, 2]
+        glance = looked if self.controller_params.look_yields_fov else None
         u = u_star.copy()
         ellipse = self.controller_params.safety_model == "ellipse"
         if self.use_cbf and (self.n > 1 or (ellipse and self.controller_params.walls)):
@@ -654,6 +656,7 @@ class PfCbfPipeline:
                     detected=det,
                     fov_yield=fov_yield,
                     priority_bonus=bonus,
+                    glance=glance,
                 )
                 results: Sequence[ControlResult | None] = _LazyResults(res, R)
             else:
@@ -670,6 +673,7 @@ class PfCbfPipeline:
                             detected=det[i] if det is not None else None,
                             fov_yield=None if fov_yield is None else fov_yield[i],
                             priority_bonus=None if bonus is None else bonus[i],
+                            glance=glance is not None and bool(glance[i]),
                         )
                     )
                 res = BatchControlResult.from_results(out, time.perf_counter() - t_rows)

@@ -305,6 +305,7 @@ class BatchedFovCbfController:
         detected: np.ndarray | None = None,
         fov_yield: np.ndarray | None = None,
         priority_bonus: np.ndarray | None = None,
+        glance: np.ndarray | None = None,
     ) -> BatchControlResult:
         """``FovCbfController.solve`` for every robot (arguments with a leading robot axis).
 
@@ -313,8 +314,8 @@ class BatchedFovCbfController:
             ids: ``(R, M)`` tie-breakers (default ``arange(M)``); safety: the robots'
             :class:`~fov_marl.control.safety.SafetyRows` (or ``(A (R,K,3), b (R,K),
             kind (R,K))``; None: from ``p_body`` as exact); detected: ``(R, M)`` bool or None;
-            fov_yield: ``(R, M)`` bool or None; priority_bonus: ``(R, M)`` m or None (see
-            ``FovCbfController.solve``).
+            fov_yield: ``(R, M)`` bool or None; priority_bonus: ``(R, M)`` m or None;
+            glance: ``(R,)`` bool or None (see ``FovCbfController.solve``).
 
         Raises:
             ValueError: shapes that do not match.
@@ -349,9 +350,13 @@ class BatchedFovCbfController:
             fov_yield = np.asarray(fov_yield, dtype=bool)
             if fov_yield.shape != (R, M):
                 raise ValueError(f"fov_yield must have shape ({R}, {M}), got {fov_yield.shape}")
+        if glance is not None:
+            glance = np.asarray(glance, dtype=bool)
+            if glance.shape != (R,):
+                raise ValueError(f"glance must have shape ({R},), got {glance.shape}")
         if p.qp_backend != "nnls":
             return self._solve_loop(
-                u_star, p_body, v_est_body, d, ids, safety, detected, t0, fov_yield
+                u_star, p_body, v_est_body, d, ids, safety, detected, t0, fov_yield, glance
             )
         self.stats["steps"] += R
         finite = (
@@ -385,6 +390,8 @@ class BatchedFovCbfController:
             skeep = skeep & finite[:, None]
         if p.safety_model == "ellipse":
             active[..., SAFETY_ROW] = False
+        if glance is not None:
+            active &= ~(glance[:, None, None] & _FOV_ROWS)
         u_proj = self._project(us)
         n_s = skeep.sum(axis=1)
         cone_ok = np.ones(R, dtype=bool)
@@ -574,7 +581,9 @@ class BatchedFovCbfController:
             p.fallback_tie_mps, p.fallback_straight,
         )  # fmt: skip
 
-    def _solve_loop(self, u_star, p_body, v_est, d, ids, safety, detected, t0, fov_yield=None):
+    def _solve_loop(
+        self, u_star, p_body, v_est, d, ids, safety, detected, t0, fov_yield=None, glance=None
+    ):
         """One per-robot controller per robot (the osqp backend)."""
         R = u_star.shape[0]
         while len(self._loop) < R:
@@ -590,6 +599,7 @@ class BatchedFovCbfController:
                     safety=None if safety is None else safety.robot(i),
                     detected=None if detected is None else detected[i],
                     fov_yield=None if fov_yield is None else fov_yield[i],
+                    glance=False if glance is None else bool(glance[i]),
                 )
             )  # fmt: skip
         for k in self.stats:

@@ -582,6 +582,7 @@ class FovCbfController:
         detected: np.ndarray | None = None,
         fov_yield: np.ndarray | None = None,
         priority_bonus: np.ndarray | None = None,
+        glance: bool = False,
     ) -> ControlResult:
         """Safe input closest to u* (Eq. 19) under the hierarchy of Eq. 18.
 
@@ -603,6 +604,10 @@ class FovCbfController:
                 the robot (:meth:`_yield_lost`; the pipeline passes the neighbours lost
                 for at least ``params.lost_fov_age_s``); None: never.
             priority_bonus: ``(M,)`` head start in d (m) of :meth:`assign_levels`, or None.
+            glance: leave every FoV row out of this step (the robot turns to look at a
+                bearing its blind travel budget has nearly spent,
+                ``params.look_yields_fov``); the collision rows stay, so the robot is
+                exactly as safe.
 
         Returns:
             :class:`ControlResult`. Non-finite inputs and solver failures give a
@@ -663,6 +668,8 @@ class FovCbfController:
         sA, sb, sk = self._safety_rows(safety, p_body, v_est_body)
         if p.safety_model == "ellipse":
             active[:, SAFETY_ROW] = False
+        if glance:
+            active[:, _FOV_ROWS] = False
         u_proj = self._project(u_star)
         st = self.stats
         if (

@@ -93,7 +93,11 @@ field                        default   source / reason
                                        safety filter and pfcbf in coverage use
                                        1.0 m; pfcbf in crossing 0)
 ``blind_travel_memory_s``    30.0      T: time constant (s) of the leak of the blind
-                                       travel (jitter is forgiven, persistence is not)
+                                       travel (jitter is forgiven, persistence is not);
+                                       inf: no leak (the safety filter: with 30 s a
+                                       slow blind creep leaked away and two robots
+                                       that never saw each other collided, safety
+                                       Section 2e)
 ``blind_travel_view_deg``    10.0      with the single vector: its travel is forgotten
                                        once its net direction lies this far inside the
                                        view (degrees); the safety filter uses
@@ -106,6 +110,14 @@ field                        default   source / reason
                                        the safety filter uses 24: forward travel
                                        along a 45° view approached a neighbour just
                                        outside it 0.67 m on a 0.5 m budget)
+``look_yields_fov``          False     while the look before the leap turns the robot
+                                       (:meth:`~fov_marl.pipeline.PfCbfPipeline.
+                                       _look_before_leap`), its FoV levels are left
+                                       out for that step (a glance; the collision rows
+                                       stay). True for the safety filter: the FoV
+                                       levels, which keep a seen neighbour at one edge
+                                       of the view, otherwise forbade the glance and
+                                       the per-bearing budget stopped the robot
 ``walls``                    True      arena walls as rows (the commanded velocity is the
                                        one the robot gets; no sliding)
 ``wall_gain``                2.5       γ_w (1/s) of the wall rows, γ_w dt ≤ 1
@@ -316,7 +328,8 @@ class ControllerParams:
             point keeps its row, [0, 100]; 0 disables.
         last_seen_max_age_s: age (s) after which a last-seen point is released, (0, 1e6].
         blind_travel_m: B in [0, 100] (m), the blind travel budget; 0 disables.
-        blind_travel_memory_s: T in (0, 1e6] (s), the leak of the blind travel.
+        blind_travel_memory_s: T in (0, 1e6] (s) or inf (no leak), the leak of the
+            blind travel.
         blind_travel_view_deg: inward margin of the view in [0, 90] (degrees) within which
             the single vector's net travel counts as looked at (Section 2d).
         blind_travel_bearings: K_b in {0} ∪ [4, 360], world bearings of the blind travel
@@ -339,6 +352,8 @@ class ControllerParams:
             held line of sight (:func:`~fov_marl.control.safety.arc_yaw_guard`).
         hold_cleanup: correct an output creeping towards a held collision row within
             the cascade's tolerance (:func:`~fov_marl.control.controller.hold_cleanup`).
+        look_yields_fov: leave the FoV rows out of the step of a robot the look before
+            the leap turns (``glance`` of :meth:`~fov_marl.control.FovCbfController.solve`).
         lost_fov_yield: when the robot is stalled (less than a fifth of u*'s
             translation kept), solve again without the FoV rows of undetected
             neighbours and use that solution if it is much closer to u*.
@@ -410,6 +425,7 @@ class ControllerParams:
     fallback_straight: bool = True
     arc_yaw_guard: bool = True
     hold_cleanup: bool = True
+    look_yields_fov: bool = False
     walls: bool = True
     wall_gain: float = 2.5
     deadlock_turn_deg: float = 60.0
@@ -465,6 +481,7 @@ class ControllerParams:
             "fallback_straight",
             "arc_yaw_guard",
             "hold_cleanup",
+            "look_yields_fov",
         ):
             _check_bool(name, getattr(self, name))
         _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)
@@ -510,7 +527,15 @@ class ControllerParams:
             check_real(
                 "lost_sigma_max_m", self.lost_sigma_max_m, 0.0, 1e6, lo_open=True, note="or inf"
             )
-        _check("blind_travel_memory_s", self.blind_travel_memory_s, 0.0, 1e6, lo_open=True)
+        if self.blind_travel_memory_s != math.inf:  # inf: no leak
+            check_real(
+                "blind_travel_memory_s",
+                self.blind_travel_memory_s,
+                0.0,
+                1e6,
+                lo_open=True,
+                note="or inf",
+            )
         _check("deadlock_turn_deg", self.deadlock_turn_deg, 0.0, 180.0)
         _check("lost_fov_age_s", self.lost_fov_age_s, 0.0, 1e6)
         _check("priority_hysteresis_m", self.priority_hysteresis_m, 0.0, 100.0)

@@ -147,86 +147,63 @@ __all__ = [
     "FILTER_TRACKER_DEFAULTS",
     "filter_controller_defaults",
     "filter_controller_params",
-    "per_bearing_fov_limit_deg",
     "vector_view_margin_deg",
 ]
 
 #: Controller settings of the filter that differ from :class:`ControllerParams`'s
-#: defaults (module docstring); ``controller_params`` dicts are applied on top. The
-#: budget's bearings are resolved per env by :func:`filter_controller_defaults` (24 below
-#: :func:`per_bearing_fov_limit_deg`, else 0: the single vector).
+#: defaults (module docstring); ``controller_params`` dicts are applied on top
+#: (:func:`filter_controller_defaults`).
 FILTER_CONTROLLER_DEFAULTS: dict[str, Any] = {
     "deadlock_turn_deg": 0.0,
     "blind_travel_m": 0.5,
     "blind_travel_bearings": 24,
+    "blind_travel_memory_s": math.inf,
+    "look_yields_fov": True,
     "lost_fov_yield": False,
 }
 #: Tracker settings of the filter that differ from :class:`TrackerParams`'s defaults.
 FILTER_TRACKER_DEFAULTS: dict[str, Any] = {"motion_model": "mixture"}  # also "auto"'s
 
 
-def per_bearing_fov_limit_deg(safety_distance_m: float, blind_travel_m: float) -> float:
-    """β* = 2 asin((D_s − B) / D_s) in degrees: the narrowest view for which driving
-    straight ahead passes every static point outside the view that is at least D_s away
-    no closer than ``D_s sin(β/2) ≥ D_s − B`` (the closest approach of a straight path to
-    a point at distance r and angle θ off it is ``r sin θ``), the margin the blind travel
-    budget keeps. 97.2° for D_s = 2 m, B = 0.5 m; 0 when B ≥ D_s.
-    """
-    if blind_travel_m >= safety_distance_m:
-        return 0.0
-    return 2.0 * math.degrees(math.asin((safety_distance_m - blind_travel_m) / safety_distance_m))
-
-
 def filter_controller_defaults(config: Any, overrides: Any = None) -> dict[str, Any]:
     """:data:`FILTER_CONTROLLER_DEFAULTS` for the env of ``config`` (a
-    :class:`~fov_marl.config.ScenarioConfig`): the blind travel budget is kept per bearing
-    (``blind_travel_bearings = 24``, safety Section 2e) when the camera is narrower than
-    :func:`per_bearing_fov_limit_deg` (``config.safety_distance_m``, the budget B of
-    ``overrides`` or the default), and as the single net-displacement vector
-    (``blind_travel_bearings = 0``, Section 2d) otherwise, unless ``overrides`` (a dict,
-    or a :class:`ControllerParams`, or None) sets ``blind_travel_bearings`` itself. With
-    the vector, ``blind_travel_view_deg`` is :func:`vector_view_margin_deg` (30°) unless
-    ``overrides`` sets it.
+    :class:`~fov_marl.config.ScenarioConfig`) and the ``overrides`` the user gives (a
+    dict, a :class:`ControllerParams`, used as given, or None): the blind travel budget is
+    kept per bearing (``blind_travel_bearings = 24``, safety Section 2e), without a leak
+    (``blind_travel_memory_s = inf``), and the FoV levels yield to the glance that resets
+    it (``look_yields_fov``). Where ``overrides`` picks the single vector
+    (``blind_travel_bearings = 0``, Section 2d) without its own ``blind_travel_view_deg``,
+    the vector forgets travel :func:`vector_view_margin_deg` (30°) inside the view.
 
-    Why: below β* forward travel near the edge of a narrow view approaches a neighbour
-    parked just outside it nearly head-on (the regression episode at β = 45°: 2.08 ->
-    1.41 m with the vector, 2.54 m per bearing). At and above β* the per-bearing budget
-    makes a robot that drives straight ahead glance sideways every ~1.3 m (the bearings at
-    67.5° off its heading are approached at cos 67.5° = 0.38 per metre and never in view)
-    and it cost well-behaved policies most of their progress: measured, N = 6, β = 120°,
-    seeds 0-19, 1000 steps, pfcbf behind the filter: final η 0.9703 and 28.9 s to the
-    normalised threshold (17 of 20 reached it), 78% of robot-steps changed, against 0.9942,
-    7.75 s (20 of 20) and 40% with the vector (0.9925, 8.61 s, 50% with its 30° view
-    margin, :func:`vector_view_margin_deg`; pfcbf alone: 0.9955, 7.14 s); the shipped
-    learned policy 0.9749 and 44.9 s against 0.9930 and 16.9 s.
-
-    Below β* the per-bearing budget is kept although it costs more still: it is what keeps
-    D_s in the regression episode, while the vector keeps robots out of contact but not
-    outside D_s there. Measured, pfcbf behind the filter, N = 6, η after 30 s, seeds
-    0 / 7 / 9: at 90° 0.61 / 0.02 / 0.02 per bearing against 0.99 / 0.67 / 0.93 with the
-    vector (0.99 / 0.98 / 0.97 alone); at 45° 0.13 / 0.006 / 0.009 against 0.92 / 0.03 /
-    0.85. A robot there must glance sideways every 0.6-0.8 m, and the FoV levels, which
-    keep a seen neighbour at one edge of a narrow view, often forbid the glance, so the
-    budget stops it. Pass ``{"blind_travel_bearings": 0}`` to trade that margin for
-    progress.
+    Why per bearing at every β, and why no leak: two robots can approach each other from
+    outside each other's view while each travels where it looks. Measured (slow test
+    ``test_no_collisions_20_episodes[adversarial-8]``: N = 8, β = 120°, robots that drive
+    at their nearest teammate, 20 seeds x 1000 steps): with the vector (30°) seed 2 had two
+    robots 75-86° off each other's heading close from 1.87 m to contact; per bearing with
+    the 30 s leak of ``ControllerParams`` seeds 2, 3 and 17 collided (min 0.42 m), the slow
+    creep that the leak forgives adding up over minutes unseen; per bearing without the
+    leak none did (min 1.535 m), and with the glance min 1.854 m. The per-bearing budget
+    makes a robot that drives straight glance sideways every ~1.3 m at 120°, which the FoV
+    levels used to forbid (pfcbf behind the filter, N = 6, seeds 0-19, 1000 steps: 0.9703
+    final η and 28.9 s to the normalised threshold, 17 of 20 seeds, with the leak and no
+    glance; 0.961, 13.6 s, 16 of 20 without the leak); with the glance 0.9939 and 17.9 s
+    (median 12 s), 20 of 20 (the vector: 0.9925, 8.61 s; pfcbf alone 0.9955, 7.14 s).
+    Narrow views stay costly: pfcbf behind the filter, η after 30 s, seeds 0 / 7 / 9, is
+    0.77 / 0.11 / 0.02 at 90° and 0.20 / 0.006 / 0.010 at 45° (alone 0.99 / 0.99 / 0.99 and
+    0.99 / 0.83 / 0.96): a robot there must glance every 0.6-0.8 m, and pfcbf's own FoV
+    levels (inside the policy) turn it back while the filter's turn it away.
     """
     out = dict(FILTER_CONTROLLER_DEFAULTS)
     if isinstance(overrides, ControllerParams):
         return out  # used as given: the defaults do not matter
     over = dict(overrides) if isinstance(overrides, Mapping) else {}
-    if "blind_travel_bearings" in over:
-        return out
-    budget = over.get("blind_travel_m", out["blind_travel_m"])
-    try:
-        limit = per_bearing_fov_limit_deg(float(config.safety_distance_m), float(budget))
-    except (TypeError, ValueError):  # a bad B: ControllerParams reports it
-        return out
-    if float(config.fov_deg) >= limit:
-        out["blind_travel_bearings"] = 0
-        if "blind_travel_view_deg" not in over:
+    if over.get("blind_travel_bearings") == 0 and "blind_travel_view_deg" not in over:
+        try:
             out["blind_travel_view_deg"] = vector_view_margin_deg(
                 float(config.robot_radius_m), float(config.safety_distance_m)
             )
+        except (TypeError, ValueError):  # a bad config: make_config reports it
+            pass
     return out
 
 

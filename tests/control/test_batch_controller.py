@@ -60,15 +60,18 @@ def _tie(s, r, safety, i, tol=1e-3):
     return bool(np.all(A @ s.u + b >= -tol) and np.all(A @ r.u + b >= -tol))
 
 
-def assert_same(cfg, params, u, p, v, d, ids, safety, det, max_ties=0, fov_yield=None, bonus=None):
+def assert_same(
+    cfg, params, u, p, v, d, ids, safety, det, max_ties=0, fov_yield=None, bonus=None, glance=None
+):
     """Batched result == per-robot results (1e-6, identical statuses and flags), except
     for at most ``max_ties`` robots whose solutions are degenerate ties (:func:`_tie`)."""
     R = u.shape[0]
     ties = 0
     batched = BatchedFovCbfController(cfg, params)
     rb = batched.solve(
-        u, p, v, d, ids, safety=safety, detected=det, fov_yield=fov_yield, priority_bonus=bonus
-    )
+        u, p, v, d, ids, safety=safety, detected=det, fov_yield=fov_yield, priority_bonus=bonus,
+        glance=glance,
+    )  # fmt: skip
     ctrls = [FovCbfController(cfg, params) for _ in range(R)]
     statuses = []
     for i in range(R):
@@ -78,6 +81,7 @@ def assert_same(cfg, params, u, p, v, d, ids, safety, det, max_ties=0, fov_yield
             detected=None if det is None else det[i],
             fov_yield=None if fov_yield is None else fov_yield[i],
             priority_bonus=None if bonus is None else bonus[i],
+            glance=glance is not None and bool(glance[i]),
         )  # fmt: skip
         r = rb.robot(i)
         ctx = f"robot {i}: {s.status} vs {r.status}"
@@ -133,6 +137,9 @@ def test_batched_equals_loop_random(name, fov):
     # the lost neighbours' FoV rows may yield (pipeline: unseen >= lost_fov_age_s)
     fy = ~det & (rng.random(det.shape) < 0.7)
     assert_same(cfg, params, u, p, v, d, ids, rows, det, max_ties=1, fov_yield=fy)
+    # robots glancing (params.look_yields_fov): their FoV rows left out
+    gl = rng.random(u.shape[0]) < 0.5
+    assert_same(cfg, params, u, p, v, d, ids, rows, det, max_ties=1, glance=gl)
     # standalone use: collision rows from p_body as exact
     st2 = assert_same(cfg, params, u, p, v, d, None, None, None)
     assert len(set(st1 + st2)) >= 2

@@ -432,3 +432,25 @@ def test_lost_neighbours_fov_rows_yield_when_they_stall_the_robot():
     a = c.solve(easy, p, v, d, safety=rows, detected=det)
     b_ = c.solve(easy, p, v, d, safety=rows, detected=det, fov_yield=~det)
     np.testing.assert_array_equal(a.u, b_.u)
+
+
+def test_a_glance_leaves_the_fov_rows_out_and_keeps_the_collision_rows():
+    """``glance`` (the pipeline's look before the leap with ``look_yields_fov``): a
+    neighbour 2.5 m away at the right edge of the view (−55°, d = 0, so its FoV rows are
+    hard) forbids turning left at ω_max; the glance turns anyway. Its collision rows stay:
+    driving at it is still stopped at D_s."""
+    ctrl = FovCbfController(CFG, ControllerParams())
+    a = math.radians(-55.0)
+    p = np.array([[2.5 * math.cos(a), 2.5 * math.sin(a)]])
+    v, d = np.zeros((1, 2)), np.zeros(1)
+    turn = np.array([0.0, 0.0, CFG.omega_max_radps])
+    held = ctrl.solve(turn, p, v, d)
+    assert held.u[2] < 0.5 * CFG.omega_max_radps and held.intervened
+    looked = ctrl.solve(turn, p, v, d, glance=True)
+    assert looked.u[2] == pytest.approx(CFG.omega_max_radps) and not looked.intervened
+    charge = np.array([*(CFG.v_max_mps * p[0] / np.linalg.norm(p[0])), CFG.omega_max_radps])
+    res = ctrl.solve(charge, p, v, d, glance=True)
+    # the closing speed allowed keeps the next sample at or beyond D_s
+    closing = float(res.u[:2] @ p[0]) / float(np.linalg.norm(p[0]))
+    assert closing * CFG.dt_s <= 2.5 - CFG.safety_distance_m + 1e-6
+    assert res.u[2] == pytest.approx(CFG.omega_max_radps, abs=1e-6)

@@ -119,14 +119,16 @@ def test_no_collisions_20_episodes(n, factory):
 
 
 def test_filter_controller_defaults_and_overrides():
-    """The filter's only departure from ControllerParams() is no deadlock steering (it must
-    not add behaviour to the policy's); dict overrides keep it, a dataclass is used as given."""
+    """The filter departs from ControllerParams() only where FILTER_CONTROLLER_DEFAULTS
+    says (no deadlock steering: it must not add behaviour to the policy's; the blind
+    travel budget per bearing, without a leak, with the glance); dict overrides keep
+    them, a dataclass is used as given."""
     base = fov_coverage_v0.parallel_env(n_agents=3)
     prm = SafetyFilterWrapper(base).pipeline.controller_params
-    vec = {"blind_travel_bearings": 0, "blind_travel_view_deg": prm.blind_travel_view_deg}
-    assert prm == ControllerParams(**{**FILTER_CONTROLLER_DEFAULTS, **vec})
+    assert prm == ControllerParams(**FILTER_CONTROLLER_DEFAULTS)
     assert prm.deadlock_turn_deg == 0.0 and not prm.motion_cone
     assert prm.safety_model == "ellipse" and prm.walls
+    assert prm.blind_travel_memory_s == math.inf and prm.look_yields_fov
     over = SafetyFilterWrapper(base, controller_params={"blind_speed_mps": 0.1})
     assert over.pipeline.controller_params.deadlock_turn_deg == 0.0
     assert over.pipeline.controller_params.blind_speed_mps == 0.1
@@ -178,10 +180,12 @@ def test_head_on_pair_neither_collides_nor_breaks_ds(fov):
 def test_filter_changes_few_harmless_random_actions():
     """Random actions, N = 6, β = 120°, robots spread in the arena: the filter steps in
     only where a neighbour (seen, or believed) or a wall is near. The first version's
-    blanket motion cone changed 96% of them. Measured here: 67% with the shipped 0.5 m
-    blind travel budget per bearing (safety Section 2e), 50% with the single vector's,
-    43% with the earlier 1 m (over seeds 10-14 x 300 steps: 75% against 73%). The issue's goal of 30% is not met: the blind rows bound
-    the speed towards the nearest particle of a belief, see the wrapper's docstring."""
+    blanket motion cone changed 96% of them. Measured here: 71.7% with the shipped 0.5 m
+    blind travel budget (per bearing, no leak, the glance outranking the FoV levels: its
+    turns count), 67% per bearing with the 30 s leak and no glance, 50% with the single
+    vector's, 43% with the earlier 1 m. The issue's goal of 30% is not met: the blind rows
+    bound the speed towards the nearest particle of a belief, see the wrapper's
+    docstring."""
     env = SafetyFilterWrapper(fov_coverage_v0.parallel_env(n_agents=6, fov_deg=120.0))
     rng = np.random.default_rng(0)
     changed = total = 0
@@ -192,7 +196,7 @@ def test_filter_changes_few_harmless_random_actions():
             _, _, _, _, infos = env.step(acts)
             changed += sum(bool(safety_of(i)["intervened"]) for i in infos.values())
             total += len(infos)
-    assert changed / total <= 0.7, changed / total
+    assert changed / total <= 0.75, changed / total
 
 
 def test_commanded_velocity_is_the_one_the_robot_gets_at_a_wall():
@@ -231,32 +235,28 @@ def test_filter_on_crossing_env():
     assert set(obs) == set(env.possible_agents)
 
 
-@pytest.mark.parametrize(
-    "fov_deg, bearings", [(45.0, 24), (90.0, 24), (97.0, 24), (97.5, 0), (120.0, 0), (360.0, 0)]
-)
-def test_blind_travel_budget_is_per_bearing_below_the_fov_limit(fov_deg, bearings):
-    """The budget is kept per bearing below β* = 2 asin((D_s − B)/D_s) = 97.18° (D_s = 2 m,
-    B = 0.5 m) and as the single vector from it on, in both wrappers; an explicit
-    ``blind_travel_bearings`` wins, a larger B lowers β*, and a dataclass is used as given."""
+@pytest.mark.parametrize("fov_deg", [45.0, 90.0, 120.0, 360.0])
+def test_blind_travel_budget_is_per_bearing_at_every_fov(fov_deg):
+    """Both wrappers keep the budget per bearing (K = 24, no leak) at every β; an explicit
+    ``blind_travel_bearings`` wins, the single vector then forgets travel only
+    asin(2 r / D_s) = 30° inside the view (pfcbf: 10°) unless its margin is given too, and
+    a dataclass is used as given."""
     from fov_marl.wrappers import VectorSafetyFilterWrapper
-    from fov_marl.wrappers.safety_filter import per_bearing_fov_limit_deg
 
-    assert per_bearing_fov_limit_deg(2.0, 0.5) == pytest.approx(97.1808, abs=1e-4)
-    assert per_bearing_fov_limit_deg(2.0, 2.0) == 0.0
     env = fov_coverage_v0.parallel_env(n_agents=3, fov_deg=fov_deg)
     prm = SafetyFilterWrapper(env).pipeline.controller_params
-    assert prm.blind_travel_bearings == bearings
-    # the vector forgets travel only 30° = asin(2 r / D_s) inside the view (pfcbf: 10°)
-    assert prm.blind_travel_view_deg == pytest.approx(10.0 if bearings else 30.0)
-    kept = SafetyFilterWrapper(env, controller_params={"blind_travel_view_deg": 12.0})
-    assert kept.pipeline.controller_params.blind_travel_view_deg == 12.0
+    assert prm.blind_travel_bearings == 24 and prm.blind_travel_memory_s == math.inf
     venv = fov_coverage_v0.vector_env(num_envs=2, n_agents=3, fov_deg=fov_deg)
-    assert (
-        VectorSafetyFilterWrapper(venv).pipeline.controller_params.blind_travel_bearings == bearings
+    vprm = VectorSafetyFilterWrapper(venv).pipeline.controller_params
+    assert vprm == prm
+    vec = SafetyFilterWrapper(env, controller_params={"blind_travel_bearings": 0})
+    assert vec.pipeline.controller_params.blind_travel_view_deg == pytest.approx(30.0)
+    kept = SafetyFilterWrapper(
+        env, controller_params={"blind_travel_bearings": 0, "blind_travel_view_deg": 12.0}
     )
+    assert kept.pipeline.controller_params.blind_travel_view_deg == 12.0
     forced = SafetyFilterWrapper(env, controller_params={"blind_travel_bearings": 36})
     assert forced.pipeline.controller_params.blind_travel_bearings == 36
-    wide_b = SafetyFilterWrapper(env, controller_params={"blind_travel_m": 1.5})  # β* = 29.0°
-    assert wide_b.pipeline.controller_params.blind_travel_bearings == (24 if fov_deg < 28.9 else 0)
+    assert forced.pipeline.controller_params.blind_travel_view_deg == 10.0
     given = ControllerParams(blind_travel_m=0.5, blind_travel_bearings=12)
     assert SafetyFilterWrapper(env, controller_params=given).pipeline.controller_params is given
