@@ -223,7 +223,8 @@ of a 45° view into a neighbour parked just outside it, see
 stalled: :data:`fov_marl.baselines.pfcbf.PFCBF_COVERAGE_DEFAULTS`).
 Net displacement, not path length: jitter cancels, and moving back undoes travel.
 ``e`` leaks with time constant ``T`` (``blind_travel_memory_s``, 30 s: the creep it
-allows, ``B (1 − λ) / dt`` with ``λ = e^{−dt/T}``, is 0.03 m/s). When ``‖e‖ ≥ ¾ B`` and
+allows, ``B (1 − λ) / dt`` with ``λ = e^{−dt/T}``, is 0.03 m/s; the safety filter has
+none, Section 2e). When ``‖e‖ ≥ ¾ B`` and
 u* keeps translating along ``e``, the pipeline turns the robot to look that way
 (:meth:`fov_marl.pipeline.PfCbfPipeline._look_before_leap`), which releases the budget.
 Measured (random actions behind the filter, N = 6, β = 120°, 2 × 150 steps): changed
@@ -270,23 +271,37 @@ exact arc. Measured (random actions behind the filter, N = 6, β = 120°, seeds 
 gave 68% there, and K_b = 12 / 36 no fewer). The pipeline
 turns the robot towards the most-spent bearing that u* approaches when ``c_k ≥ ¾ B``
 (:meth:`fov_marl.pipeline.PfCbfPipeline._look_before_leap`). The safety filter uses
-K_b = 24 (15°: the bins cost at most 0.9%) for cameras narrower than
-``β* = 2 asin((D_s − B) / D_s)`` (97.2° at D_s = 2 m, B = 0.5 m;
-:func:`fov_marl.wrappers.safety_filter.filter_controller_defaults`) and the vector
-from β* on: driving straight ahead passes a static point outside the view at distance
-r no closer than ``r sin(β/2)``, ≥ D_s − B for r ≥ D_s when β ≥ β*, while per bearing
-a robot that drives straight must glance sideways every ~1.3 m (the bearings 67.5° off
-its heading at 120°, approached at 0.38 per metre, are never in view). Measured at
-120° (N = 6, seeds 0-19, 1000 steps): pfcbf behind the filter reached the normalised
-threshold in 28.9 s (17 of 20 seeds) per bearing against 7.75 s (20 of 20) with the
-vector. Travel near the edge of a wide view towards a neighbour just outside it is the
-hole the vector leaves when it forgets travel 10° inside the view (crab-walking at
-β/2 − 10° approaches a point just beyond the edge at cos 10°; measured, an adversary
-went from 1.55 to 1.12 m that way at 120°), so the filter's vector forgets travel only
-``asin(2 r / D_s)`` = 30° inside the view (``blind_travel_view_deg``,
-:func:`fov_marl.wrappers.safety_filter.vector_view_margin_deg`): a static point outside
-the view and at least D_s away is then passed at no less than 2 r.
-``pfcbf`` keeps the vector, whose acceptance sweeps were measured with it.
+K_b = 24 (15°: the bins cost at most 0.9%) at every β, with no leak
+(``blind_travel_memory_s = inf``), and lets that turn outrank the FoV levels for the
+step (``look_yields_fov``, a glance; the collision rows stay):
+:func:`fov_marl.wrappers.safety_filter.filter_controller_defaults`.
+
+Why per bearing also for wide views, and why no leak. The single vector is blind to a
+neighbour that moves: two robots may each travel where they look and still approach
+each other from outside each other's view. Measured (the filter, robots that drive at
+their nearest teammate, N = 8, β = 120°, seed 2): two robots 75-86° off each other's
+heading closed at 0.5-0.6 m/s each, from 1.87 m to contact, both with the vector
+zeroed every step. Per bearing, each robot's approach towards every bearing it has not
+looked at is bounded by ``B``, so a pair that never looks closes by at most ``2 B``
+(plus the bins' spacing) -- but only without the leak: with ``T = 30 s`` the creep of
+``B / T`` per robot that the leak forgives added up over minutes unseen, and three of
+20 such episodes collided (min 0.42 m); without it none did (min 1.535 m; 1.854 m with
+the glance). The price is that a robot driving straight must glance sideways every
+~1.3 m at 120° (the bearings 67.5° off its heading, approached at 0.38 per metre, are
+never in view). The FoV levels, which keep a seen neighbour at one edge of the view,
+forbade those glances, and the budget then stopped the robot: pfcbf behind the filter
+(N = 6, seeds 0-19, 1000 steps) reached the normalised threshold in 28.9 s (17 of 20)
+with the leak and without the glance; with the glance in 17.9 s (median 11 s), 20 of
+20, final η 0.9939 (the vector: 8.61 s, 0.9925; pfcbf alone 7.14 s, 0.9955). Narrow
+views still cost more (:func:`fov_marl.wrappers.safety_filter.filter_controller_defaults`).
+An explicit ``blind_travel_bearings =
+0`` selects the vector, which then forgets travel only ``asin(2 r / D_s)`` = 30° inside
+the view (``blind_travel_view_deg``,
+:func:`fov_marl.wrappers.safety_filter.vector_view_margin_deg`): a *static* point
+outside the view and at least D_s away is then passed at no less than 2 r (with 10°,
+an adversary crab-walking at β/2 − 10° went from 1.55 to 1.12 m towards one at 120°).
+``pfcbf`` keeps the vector with its 30 s leak and no glance, whose acceptance sweeps
+were measured with them: its own FoV levels are part of the paper's controller.
 
 3. Walls
 ========

@@ -81,8 +81,8 @@ ablation, not stress-swept.
 The controller defaults are :class:`~fov_marl.control.ControllerParams`' except
 :data:`FILTER_CONTROLLER_DEFAULTS`: no "keep right" deadlock steering, which would
 add a behaviour of the filter's own to the policy's; and the blind travel budget
-(``blind_travel_m = 0.5`` m, per bearing below 97.2°, :mod:`fov_marl.control.safety`
-Sections 2d-2e):
+(``blind_travel_m = 0.5`` m, per bearing, no leak, the glance outranking the FoV levels;
+:mod:`fov_marl.control.safety` Sections 2d-2e, :func:`filter_controller_defaults`):
 an arbitrary
 policy may drive persistently into space its robot has not looked at (``pfcbf`` uses
 1 m in coverage, and none in crossing, where it stopped robots that keep their
@@ -97,18 +97,17 @@ particle lay near. It spent the whole 1 m budget in 1.2 s and touched at 0.95 m.
 With 0.5 m the episode kept 2.44 m, until the arc guard (safety Section 1c) sent it on
 another course on which a robot drove forward, in view, towards a neighbour parked
 2.08 m away at −34° to −38°: every forward step zeroed the budget along its way, and it
-closed to 1.41 m. Below β* = 2 asin((D_s − B)/D_s) = 97.2° the budget is therefore
-kept per bearing (``blind_travel_bearings = 24``, safety Section 2e): no bearing the
-robot has not had in view is approached by more than 0.5 m; the episode keeps 2.54 m.
-From β* on it stays the single vector (:func:`filter_controller_defaults`: driving
-straight ahead passes a point outside such a view no closer than ``D_s sin(β/2) ≥
-D_s − B``), because per bearing a robot that drives straight must glance sideways every
-~1.3 m, and that cost well-behaved policies most of their progress at 120° (pfcbf behind
-the filter, N = 6, seeds 0-19: 28.9 s to the normalised threshold against 7.75 s). The 0.5 m (on the single vector) cost little: random actions (N = 6, 120°,
-2 x 300 steps) are changed in 70% of the robot-steps against 67% (51% against 43% over
-2 x 150 steps), and the learned
-policy's final η behind the filter (seeds 0-3) is unchanged within noise. The
-episode is a regression test. There is also no yielding of lost neighbours' FoV levels (``lost_fov_yield``, pfcbf's
+closed to 1.41 m. The budget is therefore kept per bearing (``blind_travel_bearings =
+24``, safety Section 2e): no bearing the robot has not had in view is approached by
+more than 0.5 m; the episode keeps 2.54 m. In the previous release it stayed the single
+vector for views of 97.2° and wider, where a *static* point outside the view is passed far
+enough, until the slow adversarial test (N = 8, 120°, robots that drive at their
+nearest teammate) had two robots that never saw each other, each travelling where it
+looked, close from 1.87 m to contact; it is now per bearing at every β, without the
+30 s leak that let a slow creep through (measurements in
+:func:`filter_controller_defaults`). Random actions (N = 6, 120°, 2 x 150 steps) are
+changed in 72% of the robot-steps against 50% with the vector, the glance's turns
+included. Both episodes are regression tests. There is also no yielding of lost neighbours' FoV levels (``lost_fov_yield``, pfcbf's
 liveness rule for crossing): behind the filter those levels are what keeps a policy
 that never looks turning towards its neighbours. Measured with the learned policy
 (seeds 0-4) and the stress grid: with the yield, final η fell from 0.92-0.99 to
@@ -218,7 +217,8 @@ def filter_controller_params(config: Any, value: Any) -> ControllerParams:
 
 def vector_view_margin_deg(robot_radius_m: float, safety_distance_m: float) -> float:
     """``asin(2 r / D_s)`` in degrees (30° for r = 0.5 m, D_s = 2 m): the filter's
-    ``blind_travel_view_deg``. The single budget vector forgets travel whose net direction
+    ``blind_travel_view_deg`` when ``blind_travel_bearings = 0`` selects the single budget
+    vector (:func:`filter_controller_defaults`). That vector forgets travel whose net direction
     lies at least this far inside the view; a static point outside the view is then at
     least this far off the direction of travel, and one at least D_s away is passed at no
     less than ``D_s sin(asin(2 r / D_s)) = 2 r``: no contact. pfcbf keeps 10°.
