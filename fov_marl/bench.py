@@ -351,7 +351,7 @@ def bench_batched_filter(
     mod = fov_coverage_v0 if scenario == "coverage" else fov_crossing_v0
     if policy == "filter":
         tp = TrackerParams(**FILTER_TRACKER_DEFAULTS)
-        # the wrapper's settings for this env (the budget's bearings depend on β)
+        # the wrapper's settings for this env (one place for both wrappers and the bench)
         cp = filter_controller_params(make_config(scenario=scenario, n_agents=n_agents), None)
     else:
         tp, cp = TrackerParams(), ControllerParams()

@@ -121,6 +121,7 @@ def check_real(
     lo_open: bool = False,
     hi_open: bool = False,
     note: str = "",
+    inf_ok: bool = False,
 ) -> float:
     """``value`` must be a finite real (see the module docstring) inside the interval.
 
@@ -129,17 +130,21 @@ def check_real(
         lo, hi: bounds (None: unbounded on that side).
         lo_open, hi_open: exclude the bound itself.
         note: appended to the message after the range (e.g. which fields set a bound).
+        inf_ok: ``+inf`` is accepted too (a switch-off value; the message says "or inf").
 
     Returns:
         ``float(value)``.
     """
-    allowed = _interval(lo, hi, lo_open, hi_open) + (f" {note}" if note else "")
+    allowed = _interval(lo, hi, lo_open, hi_open) + (" or inf" if inf_ok else "")
+    allowed += f" {note}" if note else ""
     if not is_real(value):
         raise ConfigError(f"{name} must be a real number in {allowed}, got {describe(value)}")
     try:
         v = float(value)
     except OverflowError:
         v = math.inf if value > 0 else -math.inf
+    if inf_ok and v == math.inf:
+        return v
     if not math.isfinite(v):
         raise ConfigError(f"{name} must be finite and in {allowed}, got {describe(value)}")
     if lo is not None and (v < lo or (lo_open and v == lo)):

@@ -390,7 +390,7 @@ class BatchedFovCbfController:
             skeep = skeep & finite[:, None]
         if p.safety_model == "ellipse":
             active[..., SAFETY_ROW] = False
-        if glance is not None:
+        if glance is not None and glance.any():
             active &= ~(glance[:, None, None] & _FOV_ROWS)
         u_proj = self._project(us)
         n_s = skeep.sum(axis=1)

@@ -523,19 +523,11 @@ class ControllerParams:
         _check("blind_travel_m", self.blind_travel_m, 0.0, 100.0)
         _check("bearing_cone_max_deg", self.bearing_cone_max_deg, 0.0, 80.0)
         _check("fallback_tie_mps", self.fallback_tie_mps, 0.0, 100.0)
-        if self.lost_sigma_max_m != math.inf:  # inf (the default) turns it off
-            check_real(
-                "lost_sigma_max_m", self.lost_sigma_max_m, 0.0, 1e6, lo_open=True, note="or inf"
-            )
-        if self.blind_travel_memory_s != math.inf:  # inf: no leak
-            check_real(
-                "blind_travel_memory_s",
-                self.blind_travel_memory_s,
-                0.0,
-                1e6,
-                lo_open=True,
-                note="or inf",
-            )
+        # inf turns the cut off (the default) / the leak off (the safety filter)
+        check_real("lost_sigma_max_m", self.lost_sigma_max_m, 0.0, 1e6, lo_open=True, inf_ok=True)
+        check_real(
+            "blind_travel_memory_s", self.blind_travel_memory_s, 0.0, 1e6, lo_open=True, inf_ok=True
+        )
         _check("deadlock_turn_deg", self.deadlock_turn_deg, 0.0, 180.0)
         _check("lost_fov_age_s", self.lost_fov_age_s, 0.0, 1e6)
         _check("priority_hysteresis_m", self.priority_hysteresis_m, 0.0, 100.0)

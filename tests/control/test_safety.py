@@ -650,6 +650,13 @@ def test_blind_travel_bearings_validated():
         with pytest.raises(ValueError, match="blind_travel_view_deg"):
             ControllerParams(blind_travel_view_deg=bad)
     assert ControllerParams(blind_travel_view_deg=90.0).blind_travel_view_deg == 90.0
+    # the leak: (0, 1e6] s, or inf (none, the safety filter's); the same rule as the cut
+    # of lost_sigma_max_m (check_real's inf_ok)
+    for name in ("blind_travel_memory_s", "lost_sigma_max_m"):
+        assert getattr(ControllerParams(**{name: math.inf}), name) == math.inf
+        for bad in (0.0, -math.inf, float("nan"), 2e6, "30"):
+            with pytest.raises(ValueError, match=rf"{name} .*\(0\.0, 1e6\] or inf"):
+                ControllerParams(**{name: bad})
 
 
 def test_blind_travel_vector_forgets_travel_only_inside_its_view_margin():
