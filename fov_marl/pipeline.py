@@ -464,7 +464,7 @@ class PfCbfPipeline:
         e = self._est
         counts = e["counts"].astype(np.float64)
         w = np.where(e["detected"], 0.0, 1.0 / np.maximum(counts, 1.0))  # (R, M)
-        pts, _ = self.bank.particles_all()
+        pts = self.bank.positions_all()
         # a row's particles are sorted by owner, in neighbour-column order: each column's
         # mass repeated by its count (the values of a gather by owner column, faster)
         return pts, np.repeat(w.reshape(-1), e["counts"].reshape(-1)).reshape(pts.shape[:2])

@@ -1411,15 +1411,23 @@ class VectorTrackerBank:
             **arrays,
         )
 
-    def particles_all(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(p_body (B N, P_T, 2) m, owner (B N, P_T) neighbour ID)`` of every row, sorted
-        by owner within a row (new arrays)."""
+    def positions_all(self) -> np.ndarray:
+        """``p_body (B N, P_T, 2)`` m of every row, sorted by owner within a row (a new
+        array; :meth:`particles_all` without the owners, which the safety rows do not need:
+        a row's blocks follow its neighbour columns, ``estimate().counts`` long each)."""
         self._check()
         R, P = self._R, self._P
         pts = np.empty((R, P, 2))
         for core, (s, e) in zip(self._cores, self._bounds, strict=True):
             pts[s:e, :, 0] = core._x
             pts[s:e, :, 1] = core._y
+        return pts
+
+    def particles_all(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(p_body (B N, P_T, 2) m, owner (B N, P_T) neighbour ID)`` of every row, sorted
+        by owner within a row (new arrays)."""
+        pts = self.positions_all()
+        R, P = self._R, self._P
         if not self._M:
             return pts, np.zeros((R, P), dtype=np.int64)
         # blocks are contiguous and in neighbour order: each ID repeated by its count

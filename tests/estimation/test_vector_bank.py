@@ -25,6 +25,8 @@ def _assert_bank_equal(vec: VectorTrackerBank, banks: list[TrackerBank]) -> None
             if isinstance(b, np.ndarray):
                 np.testing.assert_array_equal(a[k * N : (k + 1) * N], b, err_msg=f.name)
         pv, ov = vec.particles_all()
+        # the owner-free copy the safety rows read is the same array
+        np.testing.assert_array_equal(vec.positions_all(), pv)
         for i in range(N):
             pb, ob = bank.particles_body(i)
             np.testing.assert_array_equal(pv[k * N + i], pb)
