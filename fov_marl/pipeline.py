@@ -712,7 +712,7 @@ class PfCbfPipeline:
                     self._own_pose[:, 2],
                     cfg.dt_s,
                     self.controller_params.blind_travel_memory_s,
-                    floor_m=self.controller_params.blind_travel_m,
+                    floor_m=self.controller_params.blind_travel_credit_m,
                     omega_radps=act[:, 2].astype(np.float64) * cfg.omega_max_radps,
                 )
             else:

@@ -247,17 +247,39 @@ def test_filter_narrow_view_edge_regression(bearings):
 @pytest.mark.parametrize("seed", [5, 10])
 def test_filter_keeps_a_well_behaved_policys_progress(seed):
     """A policy that drives where it looks (pfcbf, N = 6, β = 120°) keeps its coverage
-    behind the filter: η after 30 s at least 95% of its η alone (measured 0.964 / 0.958
+    behind the filter: η after 30 s at least 93% of its η alone (measured 0.959 / 0.939
     against 0.994 / 0.994 for seeds 5 / 10). The per-bearing budget makes it glance
     sideways every ~1.3 m; before the glance outranked the FoV levels
     (``look_yields_fov``) that cut its translation: 0.829 / 0.499 (the counterfactual
-    below). Over seeds 0-14, 12 keep at least 96%; seeds 7, 9 and 13 lag at 30 s
-    (0.38-0.62 of η alone: the particles of unseen neighbours block them) and reach the
-    normalised threshold at 38, 88 and 42 s (1000 steps, see the README)."""
+    below). With the credit for backing away (``blind_travel_credit_m = 0.5``, the
+    previous release) it kept 0.964 / 0.958; over seeds 0-14 then, 12 kept at least 96%,
+    and seeds 7, 9 and 13 lagged at 30 s (0.38-0.62 of η alone: the particles of unseen
+    neighbours block them) and reached the normalised threshold at 38, 88 and 42 s."""
     alone = run_episode("coverage", "pfcbf", seed, n_agents=6, max_steps=150)
     filt = run_episode("coverage", "pfcbf", seed, n_agents=6, max_steps=150, safety_filter=True)
     assert filt.collisions == 0
-    assert filt.final_eta >= 0.95 * alone.final_eta, (filt.final_eta, alone.final_eta)
+    assert filt.final_eta >= 0.93 * alone.final_eta, (filt.final_eta, alone.final_eta)
+
+
+@pytest.mark.parametrize("credit_m", [0.0, 0.5])
+def test_filter_budget_gives_no_credit_for_backing_away(credit_m):
+    """head_on, N = 12, β = 120°, head_on_pair start, seed 9000: the one D_s breach from
+    a start outside D_s in the full stress grid (760 cases) with the previous release,
+    whose per-bearing budget let moving away from a bearing build up to B = 0.5 m of
+    credit towards it. A robot backed 0.49 m away from a bearing while the head-on
+    neighbour there followed it (unseen: its belief was 7 m off), then drove 0.9 m
+    towards it without looking, from 2.51 m to 1.654 m. Without credit (the default,
+    safety Section 2e) it keeps 2.426 m; the credit is the counterfactual."""
+    from fov_marl.stress import StressCase, run_stress_episode
+
+    fk = {"controller_params": {"blind_travel_credit_m": credit_m}}
+    case = StressCase("head_on", 12, 120.0, "head_on_pair", filter_kwargs=fk)
+    ep = run_stress_episode(case, 9000, 300)
+    assert ep["collisions"] == 0, ep
+    if credit_m == 0.0:
+        assert ep["min_distance_m"] >= 2.0, ep
+    else:
+        assert ep["min_distance_m"] < 1.8, ep
 
 
 def test_filter_budget_without_the_glance_stalls_a_well_behaved_policy():

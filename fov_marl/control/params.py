@@ -110,6 +110,11 @@ field                        default   source / reason
                                        the safety filter uses 24: forward travel
                                        along a 45° view approached a neighbour just
                                        outside it 0.67 m on a 0.5 m budget)
+``blind_travel_credit_m``    0.0       per bearing: the most credit (m) moving away from
+                                       a bearing builds towards it; 0: none (a credit
+                                       trusts the unseen neighbour to stand still: one
+                                       that followed was approached 0.9 m blind on a
+                                       0.5 m budget with 0.5 m of credit)
 ``look_yields_fov``          False     while the look before the leap turns the robot
                                        (:meth:`~fov_marl.pipeline.PfCbfPipeline.
                                        _look_before_leap`), its FoV levels are left
@@ -334,6 +339,8 @@ class ControllerParams:
             the single vector's net travel counts as looked at (Section 2d).
         blind_travel_bearings: K_b in {0} ∪ [4, 360], world bearings of the blind travel
             budget (0: the single net-displacement vector).
+        blind_travel_credit_m: F in [0, 100] (m), with the budget per bearing the most
+            credit moving away from a bearing builds towards it (Section 2e); 0: none.
         walls: add the arena walls as rows.
         wall_gain: γ_w (1/s) of the wall rows, (0, 1e3].
         deadlock_turn_deg: turn of u*'s translation (degrees, to the right) tried when
@@ -418,6 +425,7 @@ class ControllerParams:
     blind_travel_memory_s: float = 30.0
     blind_travel_view_deg: float = 10.0
     blind_travel_bearings: int = 0
+    blind_travel_credit_m: float = 0.0
     lost_sigma_max_m: float = math.inf
     undetected_quantile: str = "gaussian"
     bearing_cone_max_deg: float = 45.0
@@ -508,6 +516,7 @@ class ControllerParams:
         _check_int("blind_bins", self.blind_bins, 0, 360)
         _check("blind_travel_view_deg", self.blind_travel_view_deg, 0.0, 90.0)
         _check_int("blind_travel_bearings", self.blind_travel_bearings, 0, 360)
+        _check("blind_travel_credit_m", self.blind_travel_credit_m, 0.0, 100.0)
         if 0 < self.blind_travel_bearings < 4:
             raise ConfigError(
                 "blind_travel_bearings must be 0 or in [4, 360], "

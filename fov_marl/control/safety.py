@@ -250,7 +250,7 @@ blind approach on a 0.5 m budget. With ``blind_travel_bearings = K_b > 0``
 the approach made towards each since the camera last looked at it
 (:func:`bearing_travel_step`, :func:`bearing_travel_reset`)::
 
-    c_k ← max(−B, λ c_k + n_k · Δ),     c_k ← 0 while the bin's sector is in view,
+    c_k ← max(0, λ c_k + n_k · Δ),      c_k ← 0 while the bin's sector is in view,
                                          |bearing of n_k in Σ_i| ≤ β/2 − π/K_b
 
 and one row per bearing (:func:`bearing_travel_rows`)
@@ -262,13 +262,22 @@ not looked at is approached by more than ``B`` (plus one step, and the bins' spa
 a bearing between two bins is approached at most ``1 / cos(π / K_b)`` times as fast
 as the nearer bin allows) between two looks, whichever way the robot travels;
 travel along ``e`` is the special case of the bearing of ``e``, so the rows bound at
-least what the single vector bounds. Net approach, as for ``e``: jitter cancels and
-moving back undoes travel, but moving away from a bearing builds at most ``B`` of
-credit towards it (``−B`` floor; without it the same changed share). Δ is the step's
-exact arc. Measured (random actions behind the filter, N = 6, β = 120°, seeds 10-14 x
-300 steps): 75% of the robot-steps changed against 73% with the single vector (2 x
-150 steps, ``tests/wrappers/test_safety_filter.py``: 67% against 50%; a floor of 0
-gave 68% there, and K_b = 12 / 36 no fewer). The pipeline
+least what the single vector bounds. Moving away from a bearing earns no credit
+towards it (the ``0`` floor; ``ControllerParams.blind_travel_credit_m``): a credit
+assumes the unseen neighbour stands still, and one that follows the robot is then
+approached by the credit *plus* ``B``. Measured with a credit of ``B`` (the previous
+release; ``head_on`` adversary, N = 12, β = 120°, ``head_on_pair`` start, seed 9000,
+the only D_s breach from a start outside D_s in the full stress grid): a robot had
+backed 0.49 m away from a bearing while the head-on neighbour there followed it, then
+drove 0.9 m towards it without looking, from 2.51 m to 1.654 m; without the credit
+the episode keeps 2.426 m. Its cost (pfcbf behind the filter, N = 6, seeds 0-19,
+1000 steps): final η 0.9945 against 0.9939, time to the normalised threshold 21.3 s
+(median 13.7) against 17.9 s (median 11.1), 60.4% of robot-steps changed against
+58.5%. Δ is the step's exact arc. Measured (random actions behind the filter, N = 6,
+β = 120°, seeds 10-14 x 300 steps, with the credit): 75% of the robot-steps changed
+against 73% with the single vector (2 x 150 steps,
+``tests/wrappers/test_safety_filter.py``: 67% against 50%; K_b = 12 / 36 no fewer).
+The pipeline
 turns the robot towards the most-spent bearing that u* approaches when ``c_k ≥ ¾ B``
 (:meth:`fov_marl.pipeline.PfCbfPipeline._look_before_leap`). The safety filter uses
 K_b = 24 (15°: the bins cost at most 0.9%) at every β, with no leak
@@ -753,7 +762,8 @@ def bearing_travel_step(
     floor_m: float = 0.0,
     omega_radps: np.ndarray | None = None,
 ) -> np.ndarray:
-    """``c_k ← max(−F, λ c_k + n_k · Δ)`` (Section 2e of the module docstring).
+    """``c_k ← max(−F, λ c_k + n_k · Δ)`` (Section 2e of the module docstring; the
+    pipeline's ``F`` is ``ControllerParams.blind_travel_credit_m``, default 0).
 
     Args:
         c_m: ``(R, K)`` approach made towards each world bearing ``n_k = (cos 2πk/K,

@@ -594,6 +594,14 @@ def test_bearing_travel_counts_the_approach_beside_the_direction_of_travel():
     for _ in range(10):  # 2 m away from bearing 0
         away = bearing_travel_step(away, np.array([[-1.0, 0.0]]), yaw, 0.2, floor_m=0.5)
     assert away[0, 0] == pytest.approx(-0.5)  # at most F of credit
+    # the default F = 0 (ControllerParams.blind_travel_credit_m): moving away earns none,
+    # so driving back towards bearing 0 spends the budget from the first metre
+    none = np.zeros((1, K))
+    for _ in range(10):
+        none = bearing_travel_step(none, np.array([[-1.0, 0.0]]), yaw, 0.2)
+    assert none[0, 0] == 0.0
+    none = bearing_travel_step(none, np.array([[1.0, 0.0]]), yaw, 0.2)
+    assert none[0, 0] == pytest.approx(0.2)
     fov = math.radians(45.0)
     seen = bearing_travel_reset(np.ones((1, K)), yaw, fov, math.pi / K)
     # |bearing| <= 22.5° - 7.5° = 15°: bins 0°, ±15° only
@@ -650,6 +658,11 @@ def test_blind_travel_bearings_validated():
         with pytest.raises(ValueError, match="blind_travel_view_deg"):
             ControllerParams(blind_travel_view_deg=bad)
     assert ControllerParams(blind_travel_view_deg=90.0).blind_travel_view_deg == 90.0
+    assert ControllerParams().blind_travel_credit_m == 0.0
+    assert ControllerParams(blind_travel_credit_m=0.5).blind_travel_credit_m == 0.5
+    for bad in (-0.1, 100.5, float("nan"), math.inf, "0.5", None):
+        with pytest.raises(ValueError, match=r"blind_travel_credit_m .*\[0\.0, 100\.0\]"):
+            ControllerParams(blind_travel_credit_m=bad)
     # the leak: (0, 1e6] s, or inf (none, the safety filter's); the same rule as the cut
     # of lost_sigma_max_m (check_real's inf_ok)
     for name in ("blind_travel_memory_s", "lost_sigma_max_m"):
