@@ -282,6 +282,20 @@ def test_filter_budget_gives_no_credit_for_backing_away(credit_m):
         assert ep["min_distance_m"] < 1.8, ep
 
 
+def test_known_issue_a_seen_neighbour_whose_cloud_overshoots():
+    """The known issue (CHANGELOG), pinned: chase_last_seen, N = 24, β = 120°, random
+    start, seed 9100 (the second full stress grid's one D_s event from a start outside
+    D_s). Robot 12 saw robot 7 parked 2.3 m ahead, but its particle cloud had run 0.7 m
+    beyond it with a std of 0.12 m, and it drove on, seeing it, to 1.977 m: no
+    collision, D_s broken by 2.3 cm. When the fix lands this test fails: make it assert
+    D_s (the branch ``wip/detected-meas-line`` has one fix, with its chatter cost)."""
+    from fov_marl.stress import StressCase, run_stress_episode
+
+    ep = run_stress_episode(StressCase("chase_last_seen", 24, 120.0, "random"), 9100, 180)
+    assert ep["collisions"] == 0, ep
+    assert 1.95 < ep["min_distance_m"] < 2.0, ep
+
+
 def test_filter_budget_without_the_glance_stalls_a_well_behaved_policy():
     """The counterfactual of the test above: the per-bearing budget with the FoV levels
     above the glance (and the 30 s leak, as released before) stalls pfcbf (seed 10: η
