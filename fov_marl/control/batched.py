@@ -356,7 +356,17 @@ class BatchedFovCbfController:
                 raise ValueError(f"glance must have shape ({R},), got {glance.shape}")
         if p.qp_backend != "nnls":
             return self._solve_loop(
-                u_star, p_body, v_est_body, d, ids, safety, detected, t0, fov_yield, glance
+                u_star,
+                p_body,
+                v_est_body,
+                d,
+                ids,
+                safety,
+                detected,
+                t0,
+                fov_yield,
+                glance,
+                priority_bonus,
             )
         self.stats["steps"] += R
         finite = (
@@ -582,8 +592,9 @@ class BatchedFovCbfController:
         )  # fmt: skip
 
     def _solve_loop(
-        self, u_star, p_body, v_est, d, ids, safety, detected, t0, fov_yield=None, glance=None
-    ):
+        self, u_star, p_body, v_est, d, ids, safety, detected, t0, fov_yield=None, glance=None,
+        bonus=None,
+    ):  # fmt: skip
         """One per-robot controller per robot (the osqp backend)."""
         R = u_star.shape[0]
         while len(self._loop) < R:
@@ -599,6 +610,7 @@ class BatchedFovCbfController:
                     safety=None if safety is None else safety.robot(i),
                     detected=None if detected is None else detected[i],
                     fov_yield=None if fov_yield is None else fov_yield[i],
+                    priority_bonus=None if bonus is None else bonus[i],
                     glance=False if glance is None else bool(glance[i]),
                 )
             )  # fmt: skip

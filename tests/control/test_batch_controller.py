@@ -254,6 +254,19 @@ def test_osqp_backend_loops_per_robot():
     u, p, v, d, ids, det = _instances(rng, 4, 3)
     rows = _rows(cfg, params, p, det, rng)
     assert_same(cfg, params, u, p, v, d, ids, rows, det)
+    # the loop passes every per-robot argument on (it dropped priority_bonus before): a
+    # head start for each robot's farthest neighbour changes its FoV levels' order here
+    rng = np.random.default_rng(3)
+    u, p, v, d, ids, det = _instances(rng, 6, 6, spread=4.0)
+    rows = _rows(cfg, params, p, det, rng)
+    bonus = np.zeros(d.shape)
+    bonus[np.arange(6), np.argmax(d, axis=1)] = 50.0
+    nnls = BatchedFovCbfController(cfg, ControllerParams())
+    plain = nnls.solve(u, p, v, d, ids, safety=rows, detected=det).u
+    led = nnls.solve(u, p, v, d, ids, safety=rows, detected=det, priority_bonus=bonus).u
+    assert np.abs(led - plain).max() > 0.5  # the bonus matters in this instance
+    glance = np.array([True, False, True, False, False, False])
+    assert_same(cfg, params, u, p, v, d, ids, rows, det, bonus=bonus, glance=glance)
 
 
 def test_shape_errors():
