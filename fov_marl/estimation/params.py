@@ -50,6 +50,14 @@ field                              default     reason
 ``recovery_gate_chi2``             27.63       ... as is one whose nearest particle is
                                                farther than this squared Mahalanobis
                                                distance (chi^2 2 dof, p = 1e-6)
+``recovery_bias_alpha``            0.2         ... and one whose detections have missed
+``recovery_bias_chi2``             13.82       the cloud's mean on one side: the EWMA
+                                               (weight alpha, over detected steps) of
+                                               the residual ``Σ_MEAS^{-1/2} (z − mean)``
+                                               beyond this chi^2 (2 dof, p = 1e-3) times
+                                               its variance ``alpha / (2 − alpha)``;
+                                               alpha 0 turns the test off (see the
+                                               tracker's step 4)
 ``ego_motion``                     ``action``  own motion from the applied action (Eq. 2);
                                                ``pose``: from the own pose in consecutive
                                                observations
@@ -164,6 +172,8 @@ _REAL_FIELDS: dict[str, tuple[float, float, bool, bool]] = {
     "mc_error_factor": (0.0, MAX_NOISE, False, False),
     "recovery_min_ess": (0.0, 1e9, False, False),
     "recovery_gate_chi2": (0.0, 1e9, True, False),
+    "recovery_bias_alpha": (0.0, 1.0, False, False),
+    "recovery_bias_chi2": (0.0, 1e9, True, False),
     "recovery_local_margin_m": (0.0, MAX_NOISE, False, False),
     "min_meas_var": (0.0, MAX_NOISE, True, False),
     # mode mixture (motion_model="mixture")
@@ -216,6 +226,10 @@ class TrackerParams:
         recovery_min_ess: effective-sample-size threshold of the re-seed around a
             detection, in [0, 1e9].
         recovery_gate_chi2: squared-Mahalanobis gate of the re-seed, in (0, 1e9].
+        recovery_bias_alpha: weight of the newest residual in the bias test's moving
+            average (tracker step 4), in [0, 1]; 0 turns the test off.
+        recovery_bias_chi2: threshold of the bias test, a χ² (2 dof) quantile, in
+            (0, 1e9].
         recovery_reseed: where a neighbour whose particles were all deleted by the view
             (Eq. 4) is re-seeded, outside F_i: ``"local"`` (the default) uniform in the
             disc around the deleted cloud's mean of radius (the cloud's largest particle
@@ -258,6 +272,8 @@ class TrackerParams:
     mc_error_factor: float = 15.0
     recovery_min_ess: float = 10.0
     recovery_gate_chi2: float = -2.0 * math.log(1e-6)
+    recovery_bias_alpha: float = 0.2
+    recovery_bias_chi2: float = -2.0 * math.log(1e-3)
     recovery_reseed: RecoveryReseed = "local"
     recovery_local_margin_m: float = 2.5
     ego_motion: EgoMotion = "action"

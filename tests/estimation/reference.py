@@ -179,8 +179,9 @@ def reference_step(
     obs: np.ndarray,
     rng: np.random.Generator,
 ) -> tuple[dict, dict]:
-    """One step from ``state`` (x, y, h (P,), counts (M,), pose_prev (3,), goal_prev (2,);
-    for the mixture also vx, vy (P,) and mode (P,)).
+    """One step from ``state`` (x, y, h (P,), counts (M,), pose_prev (3,), goal_prev (2,),
+    optionally bias (M, 2) and bias_alarm (M,) of the bias test (zeros / False when
+    absent); for the mixture also vx, vy (P,) and mode (P,)).
 
     Returns ``(new_state, estimate)`` with estimate keys mean, cov, a, b, psi, dist, counts,
     recovered, and for the mixture mode_probs (M, 4) and velocity (M, 2).
@@ -231,6 +232,8 @@ def reference_step(
     counts = state["counts"]
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
 
+    bias = np.array(state.get("bias", np.zeros((m, 2))), dtype=np.float64)
+    alarm = np.array(state.get("bias_alarm", np.zeros(m, dtype=bool)))
     sets, weights, recovered, esss, mixes = [], [], [], [], []
     for j in range(m):
         sl = slice(starts[j], starts[j] + counts[j])
@@ -267,8 +270,10 @@ def reference_step(
             lw = -0.5 * (maha + dh**2 / var[2])
             w = np.exp(lw - lw.max())
             ess = w.sum() ** 2 / np.sum(w**2)
-            bad = maha.min() > params.recovery_gate_chi2 or ess < min(
-                params.recovery_min_ess, 0.5 * counts[j]
+            bad = (
+                maha.min() > params.recovery_gate_chi2
+                or ess < min(params.recovery_min_ess, 0.5 * counts[j])
+                or bool(alarm[j])
             )
             if bad:
                 nz = rng.standard_normal((3, counts[j]))
@@ -318,6 +323,19 @@ def reference_step(
     cov = cov * (1.0 + params.mc_error_factor / np.array(esss))[:, None, None]
     a, b, psi = confidence_ellipse(cov, chi2)
     dist = np.array([ellipse_distance(np.zeros(2), mean[j], a[j], b[j], psi[j]) for j in range(m)])
+    # the bias test (tracker step 4): world-frame EWMA of Σ_MEAS^{-1/2} (z − mean)
+    alpha = params.recovery_bias_alpha
+    if alpha > 0.0:
+        sd = np.sqrt(var[:2])
+        c, s_ = math.cos(pose_now[2]), math.sin(pose_now[2])
+        for j in range(m):
+            if recovered[j]:
+                bias[j] = 0.0
+            elif slots[j, 0] > 0.5:
+                r = (slots[j, 1:3] - mean[j]) / sd
+                r_world = np.array([c * r[0] - s_ * r[1], s_ * r[0] + c * r[1]])
+                bias[j] = (1.0 - alpha) * bias[j] + alpha * r_world
+            alarm[j] = float(bias[j] @ bias[j]) * (2.0 - alpha) / alpha > params.recovery_bias_chi2
     new_counts = allocate_reference(
         dist, p_total, params.min_particles_per_neighbour, params.allocation_scale_m
     )
@@ -338,6 +356,8 @@ def reference_step(
         counts=new_counts,
         pose_prev=pose_now,
         goal_prev=lay.goal_body(obs),
+        bias=bias,
+        bias_alarm=alarm,
     )
     if mix:
         vv = np.concatenate(vs)

@@ -38,6 +38,8 @@ def _state(tr: NeighborTracker) -> dict:
         counts=b._counts[0].copy(),
         pose_prev=b._pose_prev[0].copy(),
         goal_prev=b._goal_prev[0].copy(),
+        bias=b._bias[0].copy(),
+        bias_alarm=b._bias_alarm[0].copy(),
     )
     if b._mix:
         out.update(vx=b._vx[0].copy(), vy=b._vy[0].copy(), mode=b._mode[0].copy())
@@ -796,3 +798,29 @@ def test_tracker_invariants_hold_for_any_geometry(
             pw = body_to_world(p, world.poses[k])
             r = cfg.robot_radius_m
             assert np.all((pw > r - 1e-5) & (pw < arena - r + 1e-5))  # float32 own pose
+
+
+def test_vectorised_bias_test_equals_slow_reference():
+    """The bias test's state (ē, alarms) and its re-seeds match the reference step by
+    step, with a sensitive test (α 0.5, χ² 2) so that it fires within the episode."""
+    params = TrackerParams(n_particles_total=300, recovery_bias_alpha=0.5, recovery_bias_chi2=2.0)
+    ep = record_episode(
+        n_agents=4, steps=40, seed=3, scenario="coverage", arena_size_m=12.0,
+        density_mean_m=(6.0, 6.0),
+    )  # fmt: skip
+    tr = NeighborTracker(ep.config, 0, params, np.random.default_rng(2))
+    tr.reset(ep.obs0[0])
+    fired = 0
+    for a, o in zip(ep.actions, ep.obs, strict=True):
+        state = _state(tr)
+        rng_ref = copy.deepcopy(tr._bank._cores[0]._rngs[0])
+        tr.step(a[0], o[0])
+        new_state, ref = reference_step(ep.config, params, 0, state, a[0], o[0], rng_ref)
+        est = tr.estimate()
+        np.testing.assert_array_equal(est.recovered, ref["recovered"])
+        np.testing.assert_allclose(est.mean_body, ref["mean"], rtol=1e-9, atol=1e-9)
+        s = _state(tr)
+        np.testing.assert_allclose(s["bias"], new_state["bias"], atol=1e-9)
+        np.testing.assert_array_equal(s["bias_alarm"], new_state["bias_alarm"])
+        fired += int(np.sum(state["bias_alarm"] & est.detected))
+    assert fired > 0  # the test ran: some alarms re-seeded a detected neighbour
