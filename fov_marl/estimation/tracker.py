@@ -512,8 +512,7 @@ class _BankCore:
         rec_det = det_f & ((maha_min > self.params.recovery_gate_chi2) | (ess < thr) | alarm)
         rec = rec_det | dead
         if rec.any():
-            for b in np.flatnonzero(rec):
-                self._recover(b, bool(det_f[b]), x, y, h, w, zx, zy, zh, pose)
+            self._recover_all(np.flatnonzero(rec), det_f, x, y, h, w, zx, zy, zh, pose)
             ess = np.where(rec, blen.astype(np.float64), ess)
         sw, mean, cov = K.weighted_moments(x, y, w, gid, starts, blen)
         if self._mix:
@@ -609,6 +608,55 @@ class _BankCore:
         out = np.zeros((self._R, self._M, 4))
         out[..., K.MODE_NAMES.index(self._model)] = 1.0
         return out
+
+    def _recover_all(self, blocks, det_f, x, y, h, w, zx, zy, zh, pose) -> None:
+        """Re-seed ``blocks`` (ascending flat block indices) in place (module docstring,
+        step 4). The robots whose re-seeds are all around detections (the common case:
+        ~2 per robot-step at N = 48) are done at once, one draw per robot of all its
+        blocks' normals (the same numbers as :meth:`_recover` block by block: a
+        Generator's normals are drawn in sequence); a robot with a deleted block goes
+        block by block, keeping its draw order."""
+        M = self._M
+        rows = blocks // M
+        slow = np.isin(rows, rows[~det_f[blocks]])
+        for b in blocks[slow]:
+            self._recover(b, bool(det_f[b]), x, y, h, w, zx, zy, zh, pose)
+        fast = blocks[~slow]
+        if fast.size == 0:
+            return
+        rows = fast // M
+        n = self._block_len[fast]
+        per = 5 if self._mix else 3  # normals per particle: x, y, h (+ 2 velocity)
+        draws = []
+        for k in np.unique(rows).tolist():
+            draws.append(self._rngs[k].standard_normal(per * int(n[rows == k].sum())))
+        flat = np.concatenate(draws)
+        off = np.zeros(fast.size, dtype=np.int64)  # each block's offset in ``flat``
+        np.cumsum(per * n[:-1], out=off[1:])
+        nb = np.repeat(n, n)
+        loc = np.arange(nb.size) - np.repeat(np.cumsum(n) - n, n)  # index in the block
+        base = np.repeat(off, n) + loc
+        idx = np.repeat(self._starts[fast], n) + loc  # particle indices
+        sd = self._meas_std
+        k_p = np.repeat(rows, n)
+        bx = np.repeat(zx.reshape(-1)[fast], n) + sd[0] * flat[base]
+        by = np.repeat(zy.reshape(-1)[fast], n) + sd[1] * flat[base + nb]
+        if self.params.clamp_to_arena:
+            bx, by = self._clamp(bx, by, pose[k_p, 0], pose[k_p, 1], pose[k_p, 2])
+        x[idx] = bx
+        y[idx] = by
+        hn = K.wrap(np.repeat(zh.reshape(-1)[fast], n) + sd[2] * flat[base + 2 * nb])
+        h[idx] = hn
+        if self._mix:
+            vx, vy = K.fresh_velocity(
+                flat[base + 3 * nb], flat[base + 4 * nb], self._vmax, hn,
+                self.params.cv_forward_bias,
+            )  # fmt: skip
+            self._vx.reshape(-1)[idx] = vx
+            self._vy.reshape(-1)[idx] = vy
+            self._mode.reshape(-1)[idx] = K.stratified_modes(loc, nb, self._cdf)
+        np.add.at(self.n_recoveries_detection, rows, 1)
+        w[idx] = 1.0
 
     def _recover(self, b, detected, x, y, h, w, zx, zy, zh, pose) -> None:
         """Re-seed block ``b`` in place (see module docstring, step 4); weights become 1."""
