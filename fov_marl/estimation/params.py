@@ -50,14 +50,16 @@ field                              default     reason
 ``recovery_gate_chi2``             27.63       ... as is one whose nearest particle is
                                                farther than this squared Mahalanobis
                                                distance (chi^2 2 dof, p = 1e-6)
-``recovery_bias_alpha``            0.2         ... and one whose detections have missed
+``recovery_bias_alpha``            0.0         ... and one whose detections have missed
 ``recovery_bias_chi2``             13.82       the cloud's mean on one side: the EWMA
                                                (weight alpha, over detected steps) of
                                                the residual ``Σ_MEAS^{-1/2} (z − mean)``
                                                beyond this chi^2 (2 dof, p = 1e-3) times
                                                its variance ``alpha / (2 − alpha)``;
-                                               alpha 0 turns the test off (see the
-                                               tracker's step 4)
+                                               alpha 0 (the default) turns the test off;
+                                               the safety filter uses 0.2 (its
+                                               ``FILTER_TRACKER_DEFAULTS`` say why; see
+                                               the tracker's step 4)
 ``ego_motion``                     ``action``  own motion from the applied action (Eq. 2);
                                                ``pose``: from the own pose in consecutive
                                                observations
@@ -227,7 +229,8 @@ class TrackerParams:
             detection, in [0, 1e9].
         recovery_gate_chi2: squared-Mahalanobis gate of the re-seed, in (0, 1e9].
         recovery_bias_alpha: weight of the newest residual in the bias test's moving
-            average (tracker step 4), in [0, 1]; 0 turns the test off.
+            average (tracker step 4), in [0, 1]; 0 (the default) turns the test off
+            (the safety filter's default is 0.2).
         recovery_bias_chi2: threshold of the bias test, a χ² (2 dof) quantile, in
             (0, 1e9].
         recovery_reseed: where a neighbour whose particles were all deleted by the view
@@ -272,7 +275,7 @@ class TrackerParams:
     mc_error_factor: float = 15.0
     recovery_min_ess: float = 10.0
     recovery_gate_chi2: float = -2.0 * math.log(1e-6)
-    recovery_bias_alpha: float = 0.2
+    recovery_bias_alpha: float = 0.0
     recovery_bias_chi2: float = -2.0 * math.log(1e-3)
     recovery_reseed: RecoveryReseed = "local"
     recovery_local_margin_m: float = 2.5

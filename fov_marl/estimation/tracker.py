@@ -45,7 +45,8 @@ Generators, and over the rare re-seeded neighbours):
    Each detected step adds the residual ``r = Σ_MEAS^{-1/2} (z − mean)`` (x, y; the
    step-5 mean; rotated into the world frame so that the robot's own turns do not
    move it) to an exponentially weighted average ``ē ← (1 − α) ē + α r``
-   (``recovery_bias_alpha`` α; undetected steps leave it). For a calibrated cloud r
+   (``recovery_bias_alpha`` α, 0 = off by default, 0.2 in the safety filter; undetected
+   steps leave it). For a calibrated cloud r
    has per-axis variance at most 1 (``Σ_MEAS`` minus the posterior's), so ``‖ē‖²
    (2 − α) / α`` is at most χ² (2 dof) distributed; above ``recovery_bias_chi2``
    (p = 1e-3 per detected step) the next detection re-seeds the neighbour. A recovered
