@@ -623,9 +623,13 @@ class _BankCore:
         for b in blocks[slow]:
             self._recover(b, bool(det_f[b]), x, y, h, w, zx, zy, zh, pose)
         fast = blocks[~slow]
-        if fast.size == 0:
-            return
-        rows = fast // M
+        if fast.size:
+            self._reseed_detected(fast, x, y, h, w, zx, zy, zh, pose)
+
+    def _reseed_detected(self, fast, x, y, h, w, zx, zy, zh, pose) -> None:
+        """Re-seed the detected blocks ``fast`` (ascending) from N(z, Σ_MEAS): per robot one
+        draw of ``(3 + 2 mixture) P_j`` normals per block, in block order."""
+        rows = fast // self._M
         n = self._block_len[fast]
         per = 5 if self._mix else 3  # normals per particle: x, y, h (+ 2 velocity)
         draws = []
@@ -667,30 +671,20 @@ class _BankCore:
         n = int(self._block_len[b])
         e = s + n
         if detected:
-            nz = g.standard_normal((3, n))
-            sd = self._meas_std
-            bx = zx[k, j] + sd[0] * nz[0]
-            by = zy[k, j] + sd[1] * nz[1]
-            if self.params.clamp_to_arena:
-                bx, by = self._clamp(bx, by, pose[k, 0], pose[k, 1], pose[k, 2])
-            x[s:e] = bx
-            y[s:e] = by
-            h[s:e] = K.wrap(zh[k, j] + sd[2] * nz[2])
-            self._recover_mixture(g, k, s, e)
-            self.n_recoveries_detection[k] += 1
+            self._reseed_detected(np.array([b]), x, y, h, w, zx, zy, zh, pose)
+            return
+        if self.params.recovery_reseed == "local":
+            cx, cy = float(x[s:e].mean()), float(y[s:e].mean())
+            spread = float(np.sqrt(np.max((x[s:e] - cx) ** 2 + (y[s:e] - cy) ** 2)))
+            radius = spread + self.params.recovery_local_margin_m
+            bx, by = self._disc_outside_fov(g, n, cx, cy, radius, pose[k])
         else:
-            if self.params.recovery_reseed == "local":
-                cx, cy = float(x[s:e].mean()), float(y[s:e].mean())
-                spread = float(np.sqrt(np.max((x[s:e] - cx) ** 2 + (y[s:e] - cy) ** 2)))
-                radius = spread + self.params.recovery_local_margin_m
-                bx, by = self._disc_outside_fov(g, n, cx, cy, radius, pose[k])
-            else:
-                bx, by = self._uniform_outside_fov(g, n, pose[k])
-            x[s:e] = bx
-            y[s:e] = by
-            h[s:e] = 2.0 * math.pi * g.random(n) - math.pi
-            self._recover_mixture(g, k, s, e)
-            self.n_recoveries_deleted[k] += 1
+            bx, by = self._uniform_outside_fov(g, n, pose[k])
+        x[s:e] = bx
+        y[s:e] = by
+        h[s:e] = 2.0 * math.pi * g.random(n) - math.pi
+        self._recover_mixture(g, k, s, e)
+        self.n_recoveries_deleted[k] += 1
         w[s:e] = 1.0
 
     def _recover_mixture(self, g: np.random.Generator, k: int, s: int, e: int) -> None:
