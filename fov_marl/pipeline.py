@@ -308,6 +308,7 @@ class PfCbfPipeline:
         self._blind_travel_world = np.zeros((self.n_rows, 2))
         self._bearing_travel = np.zeros_like(self._bearing_travel)
         self._fov_lead = np.full(self.n_rows, -1, dtype=np.int64)
+        self._yielded = np.zeros(self.n_rows, dtype=bool)
         self.counters = {"interventions": 0, "fallbacks": 0, "safety_fallbacks": 0}
         self.last_results = _LazyResults(None, self.n_rows)
         self.last_batch = None
@@ -388,6 +389,7 @@ class PfCbfPipeline:
         self._blind_travel_world[rows] = 0.0
         self._bearing_travel[rows] = 0.0
         self._fov_lead[rows] = -1
+        self._yielded[rows] = False
         if self.estimates == "tracker" and self.n > 1:
             init = self._known_init(init_all)
             self.bank.reset_copies(
@@ -657,6 +659,7 @@ class PfCbfPipeline:
                     fov_yield=fov_yield,
                     priority_bonus=bonus,
                     glance=glance,
+                    yield_latched=None if fov_yield is None else self._yielded,
                 )
                 results: Sequence[ControlResult | None] = _LazyResults(res, R)
             else:
@@ -674,6 +677,7 @@ class PfCbfPipeline:
                             fov_yield=None if fov_yield is None else fov_yield[i],
                             priority_bonus=None if bonus is None else bonus[i],
                             glance=glance is not None and bool(glance[i]),
+                            yield_latched=fov_yield is not None and bool(self._yielded[i]),
                         )
                     )
                 res = BatchControlResult.from_results(out, time.perf_counter() - t_rows)
@@ -692,6 +696,7 @@ class PfCbfPipeline:
                     else:
                         results = _LazyResults(res, R)
             self._update_fov_lead(res.level, e["ids"])
+            self._yielded = res.yielded.copy()
             self.last_batch = res
             self.last_results = results
             u = res.u.copy()

@@ -79,7 +79,7 @@ class BatchControlResult:
     :data:`CONTROL_STATUSES` (``status_names``: the strings), ``fallback``, ``intervened``
     ``(R,)`` bool, ``kappa``, ``active``, ``level`` ``(R, M, 4)``, ``n_levels``, ``n_qp``
     ``(R,)`` int, ``qp_status (R,)`` object, ``safety_violation``, ``cone_violation`` ``(R,)``,
-    and ``timings`` (team seconds: ``rows``, ``cascade``, ``total``).
+    ``yielded (R,)`` bool, and ``timings`` (team seconds: ``rows``, ``cascade``, ``total``).
     """
 
     u: np.ndarray
@@ -95,6 +95,7 @@ class BatchControlResult:
     qp_status: np.ndarray
     safety_violation: np.ndarray
     cone_violation: np.ndarray
+    yielded: np.ndarray
     timings: dict
 
     @property
@@ -123,6 +124,7 @@ class BatchControlResult:
             qp_status=str(self.qp_status[i]),
             safety_violation=float(self.safety_violation[i]),
             cone_violation=float(self.cone_violation[i]),
+            yielded=bool(self.yielded[i]),
             timings=share,
         )
 
@@ -144,6 +146,7 @@ class BatchControlResult:
             qp_status=np.array([r.qp_status for r in results], dtype=object),
             safety_violation=np.array([r.safety_violation for r in results]),
             cone_violation=np.array([r.cone_violation for r in results]),
+            yielded=np.array([r.yielded for r in results], dtype=bool),
             timings={"rows": 0.0, "cascade": 0.0, "total": t_total},
         )
 
@@ -306,6 +309,7 @@ class BatchedFovCbfController:
         fov_yield: np.ndarray | None = None,
         priority_bonus: np.ndarray | None = None,
         glance: np.ndarray | None = None,
+        yield_latched: np.ndarray | None = None,
     ) -> BatchControlResult:
         """``FovCbfController.solve`` for every robot (arguments with a leading robot axis).
 
@@ -315,7 +319,7 @@ class BatchedFovCbfController:
             :class:`~fov_marl.control.safety.SafetyRows` (or ``(A (R,K,3), b (R,K),
             kind (R,K))``; None: from ``p_body`` as exact); detected: ``(R, M)`` bool or None;
             fov_yield: ``(R, M)`` bool or None; priority_bonus: ``(R, M)`` m or None;
-            glance: ``(R,)`` bool or None (see ``FovCbfController.solve``).
+            glance, yield_latched: ``(R,)`` bool or None (see ``FovCbfController.solve``).
 
         Raises:
             ValueError: shapes that do not match.
@@ -354,6 +358,10 @@ class BatchedFovCbfController:
             glance = np.asarray(glance, dtype=bool)
             if glance.shape != (R,):
                 raise ValueError(f"glance must have shape ({R},), got {glance.shape}")
+        if yield_latched is not None:
+            yield_latched = np.asarray(yield_latched, dtype=bool)
+            if yield_latched.shape != (R,):
+                raise ValueError(f"yield_latched must have shape ({R},), got {yield_latched.shape}")
         if p.qp_backend != "nnls":
             return self._solve_loop(
                 u_star,
@@ -367,6 +375,7 @@ class BatchedFovCbfController:
                 fov_yield,
                 glance,
                 priority_bonus,
+                yield_latched,
             )
         self.stats["steps"] += R
         finite = (
@@ -426,6 +435,7 @@ class BatchedFovCbfController:
         safety_kappa = np.zeros(R)
         n_relaxed = 0
         cone_v = np.zeros(R)
+        yielded = np.zeros(R, dtype=bool)
         level_out = level_all
         if qi.size:
             nq = qi.size
@@ -463,7 +473,8 @@ class BatchedFovCbfController:
                 lost = np.zeros(actq.shape, dtype=bool)
                 fov_slot = np.tile(_FOV_ROWS, M)  # never an Eq. 12 safety row
                 lost[:, : M * 4] = np.repeat(fov_yield[qi], 4, axis=1) & actq[:, : M * 4] & fov_slot
-                self._yield_lost(qres, Aq, bq, lv, actq, usq, lost)
+                latch = None if yield_latched is None else yield_latched[qi]
+                yielded[qi] = self._yield_lost(qres, Aq, bq, lv, actq, usq, lost, latch)
             res_u[qi] = qres.u
             kq = np.where(actq, qres.kappa, 0.0)
             kappa[qi] = kq[:, : M * 4].reshape(nq, M, 4)
@@ -518,6 +529,7 @@ class BatchedFovCbfController:
             qp_status[bad] = ""
             safety_v[bad] = 0.0
             cone_v[bad] = 0.0
+            yielded[bad] = False
         st = self.stats
         st["qp_solves"] += int(n_qp.sum())
         st["fallbacks"] += int(fallback.sum())
@@ -537,6 +549,7 @@ class BatchedFovCbfController:
             qp_status=qp_status,
             safety_violation=safety_v,
             cone_violation=cone_v,
+            yielded=yielded,
             timings={"rows": t1 - t0, "cascade": t2 - t1, "total": time.perf_counter() - t0},
         )
 
@@ -565,12 +578,18 @@ class BatchedFovCbfController:
             return
         _adopt(qres, alt, c_i[use], use)
 
-    def _yield_lost(self, qres, Aq, bq, lv, actq, usq, lost) -> None:
-        """:meth:`FovCbfController._yield_lost` for the robots that need it (in place on qres)."""
+    def _yield_lost(self, qres, Aq, bq, lv, actq, usq, lost, latched=None) -> np.ndarray:
+        """:meth:`FovCbfController._yield_lost` for the robots that need it (in place on qres);
+        returns ``(nq,)`` bool, the robots whose lost rows yielded."""
         u = qres.u
-        cand = _stalled(u, usq, self.config.v_max_mps) & ~qres.fallback & lost.any(axis=1)
+        trigger = _stalled(u, usq, self.config.v_max_mps)
+        if latched is not None and self.params.lost_fov_yield_latch:
+            moving = np.hypot(usq[:, 0], usq[:, 1]) >= 0.1 * self.config.v_max_mps
+            trigger = np.where(latched, moving, trigger)
+        cand = trigger & ~qres.fallback & lost.any(axis=1)
+        yielded = np.zeros(u.shape[0], dtype=bool)
         if not cand.any():
-            return
+            return yielded
         c_i = np.flatnonzero(cand)
         alt = self._qp_solve(Aq[c_i], bq[c_i], lv[c_i], actq[c_i] & ~lost[c_i], usq[c_i])
         wt = np.array([1.0, 1.0, self._w * self._w])
@@ -578,10 +597,12 @@ class BatchedFovCbfController:
         cost_alt = ((alt.u - usq[c_i]) ** 2) @ wt
         use = ~alt.fallback & (cost_alt <= 0.5 * cost_cur)
         if not use.any():
-            return
+            return yielded
         alt.n_qp = alt.n_qp + qres.n_qp[c_i]
         alt.kappa = np.where(lost[c_i], 0.0, alt.kappa)
         _adopt(qres, alt, c_i[use], use)
+        yielded[c_i[use]] = True
+        return yielded
 
     def _safe_fallback(self, u_qp, A, b, kind, keep) -> np.ndarray:
         """:meth:`FovCbfController._safe_fallback` for ``(F,)`` robots (u_qp NaN rows: None)."""
@@ -593,7 +614,7 @@ class BatchedFovCbfController:
 
     def _solve_loop(
         self, u_star, p_body, v_est, d, ids, safety, detected, t0, fov_yield=None, glance=None,
-        bonus=None,
+        bonus=None, latched=None,
     ):  # fmt: skip
         """One per-robot controller per robot (the osqp backend)."""
         R = u_star.shape[0]
@@ -612,6 +633,7 @@ class BatchedFovCbfController:
                     fov_yield=None if fov_yield is None else fov_yield[i],
                     priority_bonus=None if bonus is None else bonus[i],
                     glance=False if glance is None else bool(glance[i]),
+                    yield_latched=False if latched is None else bool(latched[i]),
                 )
             )  # fmt: skip
         for k in self.stats:

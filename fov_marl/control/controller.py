@@ -250,6 +250,9 @@ class ControlResult:
         safety_violation: max κ* over the safety rows (0 when collision avoidance holds).
         cone_violation: max κ* over the motion-cone rows (0 when the robot moves
             faster than ``blind_speed_mps`` only inside the cone, or without the cone).
+        yielded: the FoV rows of lost neighbours yielded this step
+            (:meth:`FovCbfController._yield_lost`); the pipeline passes it back as the
+            next step's ``yield_latched``.
         timings: seconds spent in ``rows`` (assembly, pruning, levels), ``cascade``,
             ``final`` (only after a failed level), ``total``.
     """
@@ -267,6 +270,7 @@ class ControlResult:
     qp_status: str = ""
     safety_violation: float = 0.0
     cone_violation: float = 0.0
+    yielded: bool = False
     timings: dict = field(default_factory=dict)
 
 
@@ -504,7 +508,9 @@ class FovCbfController:
             return qres
         return alt
 
-    def _yield_lost(self, qres, A_q, b_q, l_q, u_star: np.ndarray, lost: np.ndarray):
+    def _yield_lost(
+        self, qres, A_q, b_q, l_q, u_star: np.ndarray, lost: np.ndarray, latched: bool = False
+    ):
         """Lost neighbours' FoV levels yield when they stall the robot (``params.lost_fov_yield``).
 
         Not in the paper. A neighbour the camera does not report keeps its FoV rows
@@ -520,10 +526,26 @@ class FovCbfController:
         first one's. Only FoV rows are dropped: the collision rows (safety level) and the
         FoV rows of the neighbours in view are the same, so the robot is exactly as safe.
 
+        The latch (``latched``: these rows yielded at the previous step and
+        ``params.lost_fov_yield_latch``) replaces the stall test by ``‖v*‖ ≥ 0.1 v_max``.
+        Without it a robot pinned by its blind rows yielded, turned towards u*, found a
+        free direction, was no longer stalled, so the lost rows turned it back at ω_max,
+        which pinned it again: ω flipped sign every step (settled pfcbf team, N = 6,
+        β = 120°, seed 3, steps 931-941). The cost test still decides, so the latch ends
+        when the rows stop costing twice the yield, when u* stops translating (the
+        robot has arrived) or when no neighbour is lost.
+
         Returns:
-            the QP result to use (κ of the dropped rows is 0).
+            the QP result to use (κ of the dropped rows is 0): ``qres`` itself unless
+            the rows yielded.
         """
-        if not lost.any() or qres.fallback or not self._stalled(qres.u, u_star):
+        if not lost.any() or qres.fallback:
+            return qres
+        if latched and self.params.lost_fov_yield_latch:
+            trigger = math.hypot(u_star[0], u_star[1]) >= 0.1 * self.config.v_max_mps
+        else:
+            trigger = self._stalled(qres.u, u_star)
+        if not trigger:
             return qres
         keep = ~lost
         alt = self._qp_solve(A_q[keep], b_q[keep], l_q[keep], u_star)
@@ -583,6 +605,7 @@ class FovCbfController:
         fov_yield: np.ndarray | None = None,
         priority_bonus: np.ndarray | None = None,
         glance: bool = False,
+        yield_latched: bool = False,
     ) -> ControlResult:
         """Safe input closest to u* (Eq. 19) under the hierarchy of Eq. 18.
 
@@ -608,6 +631,8 @@ class FovCbfController:
                 bearing its blind travel budget has nearly spent,
                 ``params.look_yields_fov``); the collision rows stay, so the robot is
                 exactly as safe.
+            yield_latched: the lost FoV rows yielded at the previous step (that step's
+                ``ControlResult.yielded``): the latch of :meth:`_yield_lost`.
 
         Returns:
             :class:`ControlResult`. Non-finite inputs and solver failures give a
@@ -713,12 +738,15 @@ class FovCbfController:
             b_q = np.concatenate([b_q, sb])
             l_q = np.concatenate([l_q, np.full(sb.size, l_s, dtype=l_q.dtype)])
         qres = self._qp_solve(A_q, b_q, l_q, u_star)
+        yielded = False
         if sb.size and p.deadlock_turn_deg > 0.0:
             qres = self._unblock(qres, A_q, b_q, l_q, u_star, n_fov)
         if fov_yield is not None:
             lost = np.zeros(b_q.shape[0], dtype=bool)
             lost[: jj.size] = np.asarray(fov_yield, dtype=bool).reshape(-1)[jj] & (rr != SAFETY_ROW)
-            qres = self._yield_lost(qres, A_q, b_q, l_q, u_star, lost)
+            before = qres
+            qres = self._yield_lost(qres, A_q, b_q, l_q, u_star, lost, yield_latched)
+            yielded = qres is not before
         kappa[jj, rr] = qres.kappa[: jj.size]
         u = qres.u
         status, fallback = qres.status, qres.fallback
@@ -761,6 +789,7 @@ class FovCbfController:
             qp_status=qres.qp_status,
             safety_violation=max(float(kappa[:, SAFETY_ROW].max(initial=0.0)), safety_kappa),
             cone_violation=float(qres.kappa[jj.size : n_fov].max(initial=0.0)),
+            yielded=yielded,
             timings={
                 "rows": t1 - t0,
                 "cascade": qres.t_cascade_s,

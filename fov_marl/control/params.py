@@ -187,6 +187,15 @@ field                        default   source / reason
                                        pinned by three neighbours lost 25-50 s before
                                        (seed 7); the collision rows stay. Off for the
                                        safety filter (``FILTER_CONTROLLER_DEFAULTS``)
+``lost_fov_yield_latch``     True      after a step whose lost FoV levels yielded, the
+                                       next step yields them without the stall test
+                                       (while u* translates and the yield still halves
+                                       the cost): a robot pinned by the blind rows
+                                       otherwise turned away (yield), found a free
+                                       direction, was turned back by the lost rows and
+                                       pinned again, ω flipping every step (settled
+                                       pfcbf team, N = 6, seed 3: 7 flips in 250 steps,
+                                       0 with it)
 ``lost_fov_age_s``           10.0      a neighbour counts as lost after this long unseen
                                        (s); yielding the FoV rows of every undetected
                                        neighbour slowed crossing (median arrival 58 s
@@ -364,6 +373,9 @@ class ControllerParams:
         lost_fov_yield: when the robot is stalled (less than a fifth of u*'s
             translation kept), solve again without the FoV rows of undetected
             neighbours and use that solution if it is much closer to u*.
+        lost_fov_yield_latch: a robot whose lost FoV rows yielded at the previous step
+            yields them again without the stall test (``yield_latched`` of
+            :meth:`~fov_marl.control.FovCbfController.solve`).
         lost_fov_age_s: seconds unseen after which a neighbour's FoV rows may yield,
             [0, 1e6].
         priority_hysteresis_m: Δ in [0, 100] (m), the head start in d_ij of the
@@ -438,6 +450,7 @@ class ControllerParams:
     wall_gain: float = 2.5
     deadlock_turn_deg: float = 60.0
     lost_fov_yield: bool = True
+    lost_fov_yield_latch: bool = True
     lost_fov_age_s: float = 10.0
     priority_hysteresis_m: float = 0.5
     omega_weight: float = 1.0
@@ -486,6 +499,7 @@ class ControllerParams:
             "motion_cone",
             "walls",
             "lost_fov_yield",
+            "lost_fov_yield_latch",
             "fallback_straight",
             "arc_yaw_guard",
             "hold_cleanup",

@@ -61,8 +61,9 @@ def _tie(s, r, safety, i, tol=1e-3):
 
 
 def assert_same(
-    cfg, params, u, p, v, d, ids, safety, det, max_ties=0, fov_yield=None, bonus=None, glance=None
-):
+    cfg, params, u, p, v, d, ids, safety, det, max_ties=0, fov_yield=None, bonus=None, glance=None,
+    latched=None,
+):  # fmt: skip
     """Batched result == per-robot results (1e-6, identical statuses and flags), except
     for at most ``max_ties`` robots whose solutions are degenerate ties (:func:`_tie`)."""
     R = u.shape[0]
@@ -70,7 +71,7 @@ def assert_same(
     batched = BatchedFovCbfController(cfg, params)
     rb = batched.solve(
         u, p, v, d, ids, safety=safety, detected=det, fov_yield=fov_yield, priority_bonus=bonus,
-        glance=glance,
+        glance=glance, yield_latched=latched,
     )  # fmt: skip
     ctrls = [FovCbfController(cfg, params) for _ in range(R)]
     statuses = []
@@ -82,6 +83,7 @@ def assert_same(
             fov_yield=None if fov_yield is None else fov_yield[i],
             priority_bonus=None if bonus is None else bonus[i],
             glance=glance is not None and bool(glance[i]),
+            yield_latched=latched is not None and bool(latched[i]),
         )  # fmt: skip
         r = rb.robot(i)
         ctx = f"robot {i}: {s.status} vs {r.status}"
@@ -95,6 +97,7 @@ def assert_same(
         np.testing.assert_allclose(r.u, s.u, atol=1e-6, err_msg=ctx)
         assert r.status == s.status, ctx
         assert r.fallback == s.fallback and r.intervened == s.intervened, ctx
+        assert r.yielded == s.yielded, ctx
         np.testing.assert_allclose(r.kappa, s.kappa, atol=1e-6, err_msg=ctx)
         np.testing.assert_array_equal(r.active, s.active)
         np.testing.assert_array_equal(r.level, s.level)
@@ -137,6 +140,9 @@ def test_batched_equals_loop_random(name, fov):
     # the lost neighbours' FoV rows may yield (pipeline: unseen >= lost_fov_age_s)
     fy = ~det & (rng.random(det.shape) < 0.7)
     assert_same(cfg, params, u, p, v, d, ids, rows, det, max_ties=1, fov_yield=fy)
+    # and whose lost rows yielded at the previous step (the latch)
+    lat = rng.random(u.shape[0]) < 0.5
+    assert_same(cfg, params, u, p, v, d, ids, rows, det, max_ties=1, fov_yield=fy, latched=lat)
     # robots glancing (params.look_yields_fov): their FoV rows left out
     gl = rng.random(u.shape[0]) < 0.5
     assert_same(cfg, params, u, p, v, d, ids, rows, det, max_ties=1, glance=gl)
@@ -238,6 +244,14 @@ def test_lost_fov_yield_batched_equals_loop_and_unpins():
     rows = SafetyRows(A, b, kind, np.zeros((R, 3)))
     fy = np.ones((R, 3), dtype=bool)
     assert_same(cfg, params, u, p, v, d, None, rows, det, fov_yield=fy)
+    # translation opened (not stalled): only the latched copies yield
+    open_rows = SafetyRows(A, np.ones((R, 3)), kind, np.zeros((R, 3)))
+    lat = np.arange(R) % 2 == 0
+    assert_same(cfg, params, u, p, v, d, None, open_rows, det, fov_yield=fy, latched=lat)
+    held = BatchedFovCbfController(cfg, params).solve(
+        u, p, v, d, safety=open_rows, detected=det, fov_yield=fy, yield_latched=lat
+    )
+    assert np.all(held.yielded[lat]) and not held.yielded[~lat].any()
     ctrl = BatchedFovCbfController(cfg, params)
     pinned = ctrl.solve(u, p, v, d, safety=rows, detected=det)
     freed = ctrl.solve(u, p, v, d, safety=rows, detected=det, fov_yield=fy)

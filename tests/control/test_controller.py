@@ -434,6 +434,43 @@ def test_lost_neighbours_fov_rows_yield_when_they_stall_the_robot():
     np.testing.assert_array_equal(a.u, b_.u)
 
 
+def test_lost_rows_that_yielded_keep_yielding_while_u_star_translates():
+    """The latch (``lost_fov_yield_latch``): the pinned crossing robot with its collision
+    rows opened, so it keeps u*'s translation and is not stalled. Unlatched, the lost
+    neighbours' FoV rows hold its yaw rate near 0; latched (they yielded at the previous
+    step), they yield again and the robot turns as u* asks."""
+    cfg, u, p, v, d, (A, _, kind) = _pinned_crossing_robot()
+    rows = (A, np.array([1.0, 1.0, 1.0]), kind)  # translation free
+    det = np.zeros(3, dtype=bool)
+    c = FovCbfController(cfg, ControllerParams())
+    free = c.solve(u, p, v, d, safety=rows, detected=det, fov_yield=~det)
+    assert free.u[:2] @ u[:2] > 0.9 * (u[:2] @ u[:2])  # not stalled
+    assert abs(free.u[2]) < 0.1 and not free.yielded  # the lost rows hold ω
+    held = c.solve(u, p, v, d, safety=rows, detected=det, fov_yield=~det, yield_latched=True)
+    assert held.yielded
+    np.testing.assert_allclose(held.u[2], -1.5)
+    np.testing.assert_allclose(held.u[:2], free.u[:2], atol=1e-9)
+    assert np.all(A @ held.u + rows[1] >= -1e-9)
+    # the stall test itself sets the flag the pipeline passes back
+    pinned = c.solve(u, p, v, d, safety=(A, np.array([0.0, 0.0, 0.3]), kind), detected=det,
+                     fov_yield=~det)  # fmt: skip
+    assert pinned.yielded
+    # the latch off: as unlatched
+    off = FovCbfController(cfg, ControllerParams(lost_fov_yield_latch=False))
+    r = off.solve(u, p, v, d, safety=rows, detected=det, fov_yield=~det, yield_latched=True)
+    np.testing.assert_array_equal(r.u, free.u)
+    assert not r.yielded
+    # u* without translation (arrived): the latch ends
+    still = np.array([0.0, 0.0, -1.5])
+    a = c.solve(still, p, v, d, safety=rows, detected=det, fov_yield=~det)
+    b = c.solve(still, p, v, d, safety=rows, detected=det, fov_yield=~det, yield_latched=True)
+    np.testing.assert_array_equal(a.u, b.u)
+    assert not b.yielded
+    # no lost neighbour: nothing to yield
+    r = c.solve(u, p, v, d, safety=rows, detected=det, fov_yield=det, yield_latched=True)
+    np.testing.assert_array_equal(r.u, free.u)
+
+
 def test_a_glance_leaves_the_fov_rows_out_and_keeps_the_collision_rows():
     """``glance`` (the pipeline's look before the leap with ``look_yields_fov``): a
     neighbour 2.5 m away at the right edge of the view (−55°, d = 0, so its FoV rows are
