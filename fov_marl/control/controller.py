@@ -326,12 +326,6 @@ class FovCbfController:
             "interventions": 0,
             "relaxed": 0,
         }
-        if self.params.safety_gain * config.dt_s > 1.0 or self.params.wall_gain * config.dt_s > 1.0:
-            raise ValueError(
-                "safety_gain * dt_s and wall_gain * dt_s must be <= 1 (discrete-time barrier), "
-                f"got {self.params.safety_gain * config.dt_s:g} and "
-                f"{self.params.wall_gain * config.dt_s:g}"
-            )
 
     def assign_levels(
         self,

@@ -50,7 +50,9 @@ field                        default   source / reason
                                        front of the mean (chance constraint, ref. [12])
 ``safety_gain``              2.5       γ (1/s) of the discrete-time barrier
                                        ``h_{k+1} ≥ (1 − γ dt) h_k`` on the metric rows
-                                       (h in m); γ dt ≤ 1 is checked (0.5 at dt 0.2 s).
+                                       (h in m); used as min(γ, 1/dt): beyond γ dt = 1
+                                       the barrier would overshoot (γ dt = 0.5 at dt
+                                       0.2 s; at dt 0.5 s the default is used as 2).
                                        Measured (filter, random actions, N = 6): 1.0
                                        changed 31% of the actions, 2.5 27%
 ``safety_hold_band_m``       0.3       b: neighbour rows approach only beyond D_s + b,
@@ -125,7 +127,7 @@ field                        default   source / reason
                                        the per-bearing budget stopped the robot
 ``walls``                    True      arena walls as rows (the commanded velocity is the
                                        one the robot gets; no sliding)
-``wall_gain``                2.5       γ_w (1/s) of the wall rows, γ_w dt ≤ 1
+``wall_gain``                2.5       γ_w (1/s) of the wall rows, used as min(γ_w, 1/dt)
 ``deadlock_turn_deg``        60.0      "keep right" when the collision rows block u*
                                        (:meth:`~fov_marl.control.controller.
                                        FovCbfController._unblock`): four crossing robots
@@ -332,7 +334,8 @@ class ControllerParams:
         safety_model: ``"ellipse"`` (rows of :mod:`fov_marl.control.safety`) or
             ``"mean"`` (Eq. 12 row 3 on the mean, the paper's).
         safety_risk: δ in (0, 0.5), one-sided risk of each neighbour row.
-        safety_gain: γ (1/s) of the discrete-time barrier on the metric rows, (0, 1e3].
+        safety_gain: γ (1/s) of the discrete-time barrier on the metric rows, (0, 1e3];
+            the rows use ``min(γ, 1/dt)`` (:func:`~fov_marl.control.safety.barrier_gain`).
         safety_hold_band_m: b in [0, 10] (m), the hold band of the neighbour rows.
         responsibility: ρ in (0, 1], share of the admissible closing per robot.
         blind_bins: K in [0, 360] bearing sectors of the blind rows (0: none).
@@ -351,7 +354,7 @@ class ControllerParams:
         blind_travel_credit_m: F in [0, 100] (m), with the budget per bearing the most
             credit moving away from a bearing builds towards it (Section 2e); 0: none.
         walls: add the arena walls as rows.
-        wall_gain: γ_w (1/s) of the wall rows, (0, 1e3].
+        wall_gain: γ_w (1/s) of the wall rows, (0, 1e3]; used as ``min(γ_w, 1/dt)``.
         deadlock_turn_deg: turn of u*'s translation (degrees, to the right) tried when
             the collision rows block it, in [0, 180]; 0 disables.
         lost_sigma_max_m: (0, 1e6] or inf (off); undetected neighbours with a larger std along the

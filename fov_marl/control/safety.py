@@ -321,7 +321,7 @@ per wall with outward world normal e and clearance ``w`` to the projection line:
 
     (Rᵀ(θ) e) · v ≤ γ_w (w − m_arc)
 
-(``γ_w = wall_gain``, γ_w dt ≤ 1), so the commanded velocity is the one the robot gets.
+(``γ_w = wall_gain``, used as ``min(γ_w, 1/dt)``, :func:`barrier_gain`), so the commanded velocity is the one the robot gets.
 
 Parameters are :class:`~fov_marl.control.params.ControllerParams` fields
 (``safety_model``, ``safety_risk``, ``safety_gain``, ``responsibility``,
@@ -348,6 +348,7 @@ __all__ = [
     "SafetyRows",
     "arc_margin",
     "arc_yaw_guard",
+    "barrier_gain",
     "risk_quantile",
     "neighbour_halfplanes",
     "particle_halfplane_offsets",
@@ -372,6 +373,18 @@ __all__ = [
 _MASS_TOL = 1e-9
 #: ``SafetyRows.kind`` codes.
 ROW_NEIGHBOUR, ROW_BLIND, ROW_WALL, ROW_CONE = 0, 1, 2, 3
+
+
+def barrier_gain(gain_per_s: float, dt_s: float) -> float:
+    """The gain the rows use: ``min(γ, 1/dt)`` (1/s).
+
+    The discrete-time barrier ``h_{k+1} ≥ (1 − γ dt) h_k`` (Section 1) needs ``γ dt ≤ 1``:
+    beyond it the bound lets ``h`` change sign in one step, i.e. cross ``D_s`` (or the
+    wall's clearance). ``γ dt = 1`` already allows reaching the boundary in one step, so
+    a larger gain is used as ``1/dt``: the controller's defaults (2.5 1/s, chosen at
+    dt = 0.2 s) stay valid at every dt the env accepts (up to 5 s).
+    """
+    return min(float(gain_per_s), 1.0 / float(dt_s))
 
 
 def arc_margin(v_max: float, omega_max: float, dt: float) -> float:
@@ -911,13 +924,13 @@ def team_safety_rows(
         arena_size_m=config.arena_size_m,
         robot_radius_m=config.robot_radius_m,
         safety_risk=params.safety_risk,
-        safety_gain=params.safety_gain,
+        safety_gain=barrier_gain(params.safety_gain, config.dt_s),
         responsibility=params.responsibility,
         blind_bins=params.blind_bins if blind else 0,
         blind_risk=params.blind_risk,
         blind_speed_mps=params.blind_speed_mps,
         walls=params.walls,
-        wall_gain=params.wall_gain,
+        wall_gain=barrier_gain(params.wall_gain, config.dt_s),
         hold_band_m=params.safety_hold_band_m,
         fov_rad=config.fov_rad if fov_rad is None else fov_rad,
         blind_density_risk=params.blind_density_risk,

@@ -19,6 +19,7 @@ from fov_marl.control.safety import (
     ROW_WALL,
     arc_margin,
     arc_yaw_guard,
+    barrier_gain,
     bearing_cone,
     blind_representatives,
     hold_band,
@@ -60,6 +61,15 @@ def _rows(**kw):
     )
     base.update(kw)
     return safety_rows(**base)
+
+
+def test_barrier_gain_is_capped_at_one_over_dt():
+    assert barrier_gain(2.5, 0.2) == 2.5  # the defaults at the paper's dt: unchanged
+    assert barrier_gain(2.5, 0.5) == 2.0
+    assert barrier_gain(2.5, 5.0) == pytest.approx(0.2)
+    # the controller builds at every dt the env accepts (it raised beyond 0.4 s)
+    for dt in (0.05, 0.5, 1.0, 5.0):
+        FovCbfController(make_config(dt_s=dt), ControllerParams())
 
 
 def test_arc_margin_bounds_the_exact_unicycle_displacement():

@@ -177,6 +177,25 @@ def test_head_on_pair_neither_collides_nor_breaks_ds(fov):
         assert unfiltered.collisions > 0
 
 
+@pytest.mark.parametrize("dt", [0.5, 1.0])
+@pytest.mark.parametrize("fov", [45.0, 120.0])
+def test_head_on_pair_at_a_coarse_control_period(dt, fov):
+    """The head-on pair at dt = 0.5 and 1 s (the env accepts up to 5 s). The default gains
+    (2.5 1/s, chosen at dt = 0.2 s) made the controller raise for dt > 0.4 s; they are now
+    used as min(γ, 1/dt) (:func:`fov_marl.control.safety.barrier_gain`), and D_s holds at
+    every sample although a robot moves up to 1 m per step."""
+    poses = np.array([[18.7, 20.0, 0.0], [21.3, 20.0, math.pi]])
+    for seed in range(2):
+        rec = run_episode(
+            "coverage", _constant([1.0, 0.0, 0.0]), seed, safety_filter=True, n_agents=2,
+            fov_deg=fov, initial_poses=poses, max_steps=int(30 / dt), dt_s=dt,
+        )  # fmt: skip
+        assert rec.collisions == 0 and rec.min_distance >= 2.0, rec
+    if fov == 120.0:  # pfcbf builds and runs there too
+        rec = run_episode("coverage", "pfcbf", 0, n_agents=6, dt_s=dt, max_steps=60)
+        assert rec.collisions == 0, rec
+
+
 def test_filter_changes_few_harmless_random_actions():
     """Random actions, N = 6, β = 120°, robots spread in the arena: the filter steps in
     only where a neighbour (seen, or believed) or a wall is near. The first version's
