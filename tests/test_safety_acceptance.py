@@ -156,9 +156,11 @@ def test_filter_wait_charge_regression_collides_with_yield_and_sigma_cut():
 
     # on the filter it was found with (1 m blind travel budget; with the shipped 0.5 m this
     # episode keeps clear even with both ablations on)
-    # (and before the FoV lead's hysteresis)
+    # (and before the FoV lead's hysteresis, and before the yield's latch, which sends it
+    # on a course that stays clear)
     cp = {
         "lost_fov_yield": True,
+        "lost_fov_yield_latch": False,
         "lost_sigma_max_m": 2.0,
         "blind_travel_m": 1.0,
         "priority_hysteresis_m": 0.0,
