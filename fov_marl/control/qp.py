@@ -307,6 +307,16 @@ class QPResult:
         n_qp: number of QPs solved.
         n_levels: number of distinct priority levels among the rows.
         t_cascade_s, t_final_s: wall time of the cascade and of the final QP.
+        level_values: ``(L,)`` the distinct levels the cascade solved, ascending (rows
+            repeating an earlier row are left out, so a level may be missing).
+        level_start_cost: ``(L,)`` ``‖u_c − u*‖²`` of the candidate ``u_c`` with which
+            the cascade reached each of those levels (NaN after a degraded level). It is
+            the projection of u* onto the higher levels with their κ*, so any input that
+            meets those levels with those κ* is at least this far from u*, up to the
+            fixing tolerance (nnls: measured at most 1.1e-4 closer over 3,000 random
+            hierarchies; OSQP's approximate solves make it only indicative):
+            :meth:`~fov_marl.control.FovCbfController._yield_lost` skips a re-solve
+            that cannot pay off.
     """
 
     u: np.ndarray
@@ -319,6 +329,8 @@ class QPResult:
     t_cascade_s: float = 0.0
     t_final_s: float = 0.0
     levels: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    level_values: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    level_start_cost: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 class HierarchicalQP:
@@ -437,7 +449,7 @@ class HierarchicalQP:
         if (A @ u_c + b).min() >= -tol:  # u* (projected) meets every row: no QP
             kappa = np.maximum(0.0, -(A @ u_c + b))
             kappa[level < 0] = 0.0
-            nlev = len(set(level.tolist()))
+            values = np.unique(level)
             return QPResult(
                 u_c,
                 kappa,
@@ -445,10 +457,12 @@ class HierarchicalQP:
                 "",
                 False,
                 0,
-                nlev,
+                values.size,
                 time.perf_counter() - t0,
                 0.0,
                 level,
+                values,
+                np.full(values.size, float((u_c - u_star) @ (u_c - u_star))),
             )
         # rows sorted by level: hard rows first, and the fixed rows are always a prefix
         order = np.argsort(level, kind="stable")
@@ -478,6 +492,8 @@ class HierarchicalQP:
         level_of_row[brk] = 1
         level_of_row = np.cumsum(level_of_row).tolist()
         nlev = len(starts)
+        values = ls[starts]
+        start_cost = np.full(nlev, np.nan)
         n_hard = int(np.count_nonzero(ls < 0))
         ks = np.zeros(R)
         if self.backend == "osqp":
@@ -492,6 +508,9 @@ class HierarchicalQP:
             res = As[done:] @ u_c + bs[done:]
             bad = np.flatnonzero(res < -tol)
             stop = R if bad.size == 0 else starts[level_of_row[done + int(bad[0])]]
+            if is_projection:  # every level in [done, stop] starts from u_c
+                hi = nlev if stop == R else level_of_row[stop] + 1
+                start_cost[level_of_row[done] : hi] = float((u_c - u_star) @ (u_c - u_star))
             # levels in [done, stop) hold at the candidate: κ* is their (round-off) violation
             lo_s = max(done, n_hard)
             if stop > lo_s:
@@ -517,7 +536,7 @@ class HierarchicalQP:
             if u_new is None and hard:  # a hard level that cannot be met: brake
                 return QPResult(
                     np.zeros(3), expand(u_c, ks), "qp_failed", qp_status, True, n_qp, nlev,
-                    time.perf_counter() - t0, 0.0, level,
+                    time.perf_counter() - t0, 0.0, level, values, start_cost,
                 )  # fmt: skip
             if u_new is None:
                 # (2) infeasible: minimise the level's violation (Eq. 18)
@@ -552,16 +571,18 @@ class HierarchicalQP:
         t1 = time.perf_counter()
         if n_qp == 0:
             return QPResult(
-                u_c, expand(u_c, ks), "unconstrained", "", False, 0, nlev, t1 - t0, 0.0, level
-            )
+                u_c, expand(u_c, ks), "unconstrained", "", False, 0, nlev, t1 - t0, 0.0, level,
+                values, start_cost,
+            )  # fmt: skip
         if degraded:
             status = "degraded"
         else:
             status = "relaxed" if ks.max() > _KAPPA_REPORT else "solved"
         if is_projection:
             return QPResult(
-                u_c, expand(u_c, ks), status, qp_status, degraded, n_qp, nlev, t1 - t0, 0.0, level
-            )
+                u_c, expand(u_c, ks), status, qp_status, degraded, n_qp, nlev, t1 - t0, 0.0, level,
+                values, start_cost,
+            )  # fmt: skip
         # final QP (Eq. 19) with every κ* fixed
         lo_fix = self._fixed_lo(As, bs, ks, u_c)
         u, qp_status = self._project(As, lo_fix, u_star)
@@ -572,12 +593,13 @@ class HierarchicalQP:
             if (As @ u - lo_fix).min() >= -tol:
                 return QPResult(
                     u, expand(u, ks), status, qp_status, degraded, n_qp, nlev, t1 - t0, t2 - t1,
-                    level,
+                    level, values, start_cost,
                 )  # fmt: skip
         # the final QP failed: keep the last cascade solution (it meets every level)
         return QPResult(
-            u_c, expand(u_c, ks), "degraded", qp_status, True, n_qp, nlev, t1 - t0, t2 - t1, level
-        )
+            u_c, expand(u_c, ks), "degraded", qp_status, True, n_qp, nlev, t1 - t0, t2 - t1, level,
+            values, start_cost,
+        )  # fmt: skip
 
     # ------------------------------------------------------------------ backends
     def _project(self, A, lo, u_star):

@@ -491,3 +491,41 @@ def test_a_glance_leaves_the_fov_rows_out_and_keeps_the_collision_rows():
     closing = float(res.u[:2] @ p[0]) / float(np.linalg.norm(p[0]))
     assert closing * CFG.dt_s <= 2.5 - CFG.safety_distance_m + 1e-6
     assert res.u[2] == pytest.approx(CFG.omega_max_radps, abs=1e-6)
+
+
+def test_yield_resolve_skipped_by_the_bound_gives_the_same_actions(monkeypatch):
+    """The lost rows' re-solve is skipped when the cascade's bound shows it cannot halve
+    the cost (``QPResult.level_start_cost``): a pfcbf team (N = 24, 40 m arena, seed 0,
+    120 steps) acts exactly as with every re-solve done, with fewer hierarchy solves
+    (measured 4,526 against 5,223)."""
+    from fov_marl.baselines import make_policy
+    from fov_marl.control import controller as ctrl_mod
+    from fov_marl.envs import fov_coverage_v0
+
+    solves = []
+    solve = FovCbfController._qp_solve
+
+    def counted(self, *args):
+        solves.append(1)
+        return solve(self, *args)
+
+    monkeypatch.setattr(FovCbfController, "_qp_solve", counted)
+
+    def episode():
+        solves.clear()
+        env = fov_coverage_v0.parallel_env(n_agents=24, max_cycles=120)
+        pol = make_policy("pfcbf", env)
+        obs, _ = env.reset(seed=0)
+        pol.reset(seed=0)
+        acts = []
+        while env.agents:
+            a = pol.act(obs)
+            acts.append(np.stack([a[k] for k in env.possible_agents]))
+            obs, *_ = env.step(a)
+        return np.asarray(acts), len(solves)
+
+    fast, n_fast = episode()
+    monkeypatch.setattr(ctrl_mod, "_YIELD_BOUND_TOL", math.inf)  # never skip
+    slow, n_slow = episode()
+    np.testing.assert_array_equal(fast, slow)
+    assert n_fast < 0.95 * n_slow, (n_fast, n_slow)
