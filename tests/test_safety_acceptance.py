@@ -107,11 +107,13 @@ def test_lost_fov_yield_latch_stops_a_pinned_robot_turning_back_and_forth():
     at 2-5 m: its blind rows pinned it, the lost FoV rows yielded, it turned left towards
     u* and found a free direction, was no longer stalled, so the lost rows turned it back
     right at ω_max, which pinned it again (5 ω flips in those 20 steps, 7 over the last
-    250). The latch (``lost_fov_yield_latch``) keeps the yield while u* translates."""
+    250). The latch (``lost_fov_yield_latch``) keeps the yield while u* translates. On
+    the budget leak the episode was found with (30 s; pfcbf's 120 s sends it elsewhere)."""
     from fov_marl.metrics import action_chatter
 
-    latched = action_chatter(_pfcbf_actions(3, 945)[925:])
-    unlatched = action_chatter(_pfcbf_actions(3, 945, lost_fov_yield_latch=False)[925:])
+    leak = {"blind_travel_memory_s": 30.0}
+    latched = action_chatter(_pfcbf_actions(3, 945, **leak)[925:])
+    unlatched = action_chatter(_pfcbf_actions(3, 945, lost_fov_yield_latch=False, **leak)[925:])
     assert latched.sum() == 0, latched
     assert unlatched[2] >= 4, unlatched  # the counterfactual chatters
 
@@ -464,6 +466,23 @@ def test_pfcbf_papers_arena_no_collisions(n, seeds):
     for seed in seeds:
         rec = _coverage(n, seed)
         assert rec.collisions == 0, (n, seed, rec)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("memory_s, collides", [(120.0, False), (30.0, True)])
+def test_pfcbf_budget_leak_blocks_a_slow_blind_creep(memory_s, collides):
+    """N = 48, seed 4, with the tracker's bias test on (its course): with the budget's
+    30 s leak a robot crept blind at 0.03 m/s (0.9 m of a 1 m budget in steady state) into
+    a neighbour whose belief it held 24 m off (min 0.60 m); pfcbf's 120 s leak blocks a
+    creep above 0.0083 m/s (min 2.32 m)."""
+    rec = _coverage(
+        48, 4,
+        policy_kwargs={
+            "tracker_params": {"recovery_bias_alpha": 0.2},
+            "controller_params": {"blind_travel_memory_s": memory_s},
+        },
+    )  # fmt: skip
+    assert (rec.collisions > 0) == collides, rec
 
 
 @pytest.mark.slow

@@ -124,6 +124,8 @@ def test_pfcbf_uses_the_blind_travel_budget_in_coverage_only():
         return pol.pipeline.controller_params.blind_travel_m
 
     assert budget(make_policy("pfcbf", cov)) == 1.0
+    # with a 120 s leak (not ControllerParams' 30 s): a slow blind creep fills it
+    assert make_policy("pfcbf", cov).pipeline.controller_params.blind_travel_memory_s == 120.0
     assert budget(make_policy("pfcbf", cross)) == 0.0
     assert budget(make_policy("lloyd-pf", cov)) == 0.0
     assert budget(make_policy("pfcbf", cov, controller_params={"blind_travel_m": 0.5})) == 0.5
