@@ -56,9 +56,14 @@ field                        default   source / reason
                                        Measured (filter, random actions, N = 6): 1.0
                                        changed 31% of the actions, 2.5 27%
 ``safety_hold_band_m``       0.3       b: neighbour rows approach only beyond D_s + b,
-                                       hold within the band, retreat below D_s
+                                       hold within the band (unless j's predicted
+                                       closing leaves no room), retreat below D_s
                                        (:func:`~fov_marl.control.safety.hold_band`): no
                                        approach/retreat chatter on the estimate's noise
+``hold_band_barrier``        True      the band never demands more retreat than the
+                                       barrier itself (False: the earlier rows, which
+                                       retreated at j's whole predicted closing within
+                                       the band; ablation)
 ``responsibility``           0.5       ρ, share of the pair's admissible closing each
                                        robot takes (both run the same rows)
 ``blind_bins``               16        K bearing sectors of the blind rows (speed bound
@@ -337,6 +342,10 @@ class ControllerParams:
         safety_gain: γ (1/s) of the discrete-time barrier on the metric rows, (0, 1e3];
             the rows use ``min(γ, 1/dt)`` (:func:`~fov_marl.control.safety.barrier_gain`).
         safety_hold_band_m: b in [0, 10] (m), the hold band of the neighbour rows.
+        hold_band_barrier: the band caps approach only and never demands more retreat
+            than the barrier (:func:`~fov_marl.control.safety.neighbour_row_offsets`);
+            False: the earlier rows ``γ g − max((1 − ρ) γ g, p)``, which within the band
+            demanded retreat at j's whole predicted closing (ablation).
         responsibility: ρ in (0, 1], share of the admissible closing per robot.
         blind_bins: K in [0, 360] bearing sectors of the blind rows (0: none).
         blind_risk: expected neighbours per sector tolerated, in [0, 1).
@@ -430,6 +439,7 @@ class ControllerParams:
     safety_risk: float = 0.01
     safety_gain: float = 2.5
     safety_hold_band_m: float = 0.3
+    hold_band_barrier: bool = True
     responsibility: float = 0.5
     blind_bins: int = 16
     blind_risk: float = 0.0
@@ -507,6 +517,7 @@ class ControllerParams:
             "arc_yaw_guard",
             "hold_cleanup",
             "look_yields_fov",
+            "hold_band_barrier",
         ):
             _check_bool(name, getattr(self, name))
         _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)

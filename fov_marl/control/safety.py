@@ -47,7 +47,11 @@ so a neighbour predicted to charge is answered in full, and one predicted to sta
 still (static model) is assumed to take its share. With γ dt ≤ 1 the pair's
 distance to each other's uncertainty band then never drops below ``D_s`` by the
 robots' own motion. A negative ``h_j`` demands retreat (the whole ``γ |h_j|`` unless
-j's model predicts that it backs off).
+j's model predicts that it backs off). The hold band (``safety_hold_band_m``,
+:func:`hold_band`) caps the approach at ``ρ γ (h_j − b)`` beyond ``D_s + b`` and at 0
+within the band, so noise around D_s does not alternate approach and retreat; it only
+takes approach away and never adds a retreat the barrier does not demand
+(:func:`neighbour_row_offsets`).
 
 Rows are kept for detected neighbours (tight σ_n: the camera's noise) and for
 undetected neighbours with ``s_j > 0`` (the robot lies outside j's uncertainty band,
@@ -364,6 +368,7 @@ __all__ = [
     "bearing_travel_reset",
     "bearing_travel_rows",
     "hold_band",
+    "neighbour_row_offsets",
     "safety_rows",
     "team_safety_rows",
 ]
@@ -932,6 +937,7 @@ def team_safety_rows(
         walls=params.walls,
         wall_gain=barrier_gain(params.wall_gain, config.dt_s),
         hold_band_m=params.safety_hold_band_m,
+        hold_band_barrier=params.hold_band_barrier,
         fov_rad=config.fov_rad if fov_rad is None else fov_rad,
         blind_density_risk=params.blind_density_risk,
         last_seen_body=last_seen_body if use_last else None,
@@ -954,9 +960,10 @@ def team_safety_rows(
 def hold_band(h: np.ndarray, band_m: float) -> np.ndarray:
     """The dead zone of the neighbour rows: ``g(h) = h − b`` above ``b``, 0 on ``[0, b]``, h below 0.
 
-    The neighbour rows use ``γ g(h)`` in place of the linear ``γ h``: approach only
-    beyond ``D_s + b``, hold (no approach, no retreat) within the band, retreat below
-    ``D_s``. g is continuous, non-decreasing and ≥ 0 exactly where h ≥ 0, so the set
+    The neighbour rows use ``ρ γ g(h)`` as a cap on their approach
+    (:func:`neighbour_row_offsets`): approach only beyond ``D_s + b``, hold within the
+    band unless j's predicted closing leaves no room (then the barrier's own retreat),
+    retreat below ``D_s``. g is continuous, non-decreasing and ≥ 0 exactly where h ≥ 0, so the set
     ``h ≥ 0`` stays forward invariant. Without the band the estimate's step-to-step
     noise (σ ≈ 0.3 m for a detected neighbour) flipped the robot between approach and
     retreat every step around h = 0 (measured: two robots head-on, forward speed
@@ -969,6 +976,43 @@ def hold_band(h: np.ndarray, band_m: float) -> np.ndarray:
     if band_m <= 0.0:
         return h
     return np.where(h > band_m, h - band_m, np.minimum(h, 0.0))
+
+
+def neighbour_row_offsets(
+    h: np.ndarray,
+    g: np.ndarray,
+    pred_mps: np.ndarray | None,
+    gain: float,
+    responsibility: float,
+) -> np.ndarray:
+    """Offsets ``b`` (m/s) of the neighbour rows ``n · v ≤ b`` (Section 1), hold band included.
+
+    ``b = min(γ h − c(h), ρ γ g(h))`` with ``c(h) = max((1 − ρ) γ h, p)``: the first term
+    is the discrete-time barrier with shared responsibility (what i may close when j
+    closes at ``c``; ``h_{k+1} ≥ (1 − γ dt) h_k``), the second the hold band's share
+    (:func:`hold_band`: approach only beyond ``D_s + b``). The band only ever takes
+    approach away: it never demands a retreat that the barrier does not. Below D_s
+    (``g = h``) and with no band the two coincide with the barrier row. Measured on
+    the earlier ``γ g − max((1 − ρ) γ g, p)``: within the band it demanded retreat at
+    the full predicted closing ``p`` although the barrier left ``γ h`` to spare (up to
+    0.75 m/s at b = 0.3 m): a pfcbf robot (N = 6, β = 120°, seed 0, robot 1, steps
+    936-946) facing a settled neighbour 3 m away, seen, whose Eq. 20 prediction closed
+    at 0.3-0.7 m/s, was told to back off at 0.44 m/s into neighbours it could not see,
+    fell to the safe fallback, turned to the neighbour, was turned back by its FoV
+    levels, and ω flipped every step.
+
+    Args:
+        h: ``(...)`` barrier values (m). g: ``hold_band(h, b)``, same shape.
+        pred_mps: the closing speed j's model predicts along the line of sight (m/s),
+            same shape, or None (j assumed to take its share).
+        gain: γ (1/s, already capped by :func:`barrier_gain`). responsibility: ρ.
+
+    Returns:
+        ``(...)`` the offsets (m/s).
+    """
+    share = (1.0 - responsibility) * gain * h
+    closing = share if pred_mps is None else np.maximum(share, pred_mps)
+    return np.minimum(gain * h - closing, responsibility * gain * g)
 
 
 def safety_rows(
@@ -995,6 +1039,7 @@ def safety_rows(
     walls: bool,
     wall_gain: float,
     hold_band_m: float = 0.0,
+    hold_band_barrier: bool = True,
     fov_rad: float = 2.0 * math.pi,
     blind_density_risk: float = 0.0,
     last_seen_body: np.ndarray | None = None,
@@ -1038,6 +1083,8 @@ def safety_rows(
             ``"particles"`` (:func:`particle_halfplane_offsets`) for the lines of
             undetected neighbours; detected ones always use the Gaussian (the
             camera's noise).
+        hold_band_barrier: :func:`neighbour_row_offsets` (True) or the earlier
+            ``γ g − max((1 − ρ) γ g, p)`` (False, ablation).
         bearing_cone_max_rad: cap on the half-angle α of the bearing cone of the
             neighbour rows within D_s (Section 1b, :func:`bearing_cone`); 0: none
             (one row along the mean's line of sight).
@@ -1071,12 +1118,17 @@ def safety_rows(
         A[..., 0:2] = -n
         g = hold_band(h, hold_band_m)
         if velocity_est_body is None:
-            closing_j = (1.0 - responsibility) * safety_gain * g
+            pred = None
         else:
             ve = np.asarray(velocity_est_body, dtype=np.float64)
             pred = -(n[..., 0] * ve[..., 0] + n[..., 1] * ve[..., 1])
-            closing_j = np.maximum((1.0 - responsibility) * safety_gain * g, pred)
-        b = safety_gain * g - closing_j
+        if hold_band_barrier:
+            b = neighbour_row_offsets(h, g, pred, safety_gain, responsibility)
+        else:  # the earlier rows (ablation): the band also demanded j's whole closing
+            closing_j = (1.0 - responsibility) * safety_gain * g
+            if pred is not None:
+                closing_j = np.maximum(closing_j, pred)
+            b = safety_gain * g - closing_j
         # undetected: never approach, but never pushed away by a belief (see docstring)
         b = np.where(det, b, np.maximum(b, 0.0))
         b = np.where(keep, b, np.inf)

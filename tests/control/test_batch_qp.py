@@ -9,7 +9,7 @@ import numpy as np
 import osqp
 import pytest
 import scipy.sparse as sp
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from fov_marl.control.batch_qp import (
@@ -147,15 +147,15 @@ def _random_hierarchy(rng, R, K):
     return A, b, level, valid, u_star
 
 
-def _check_against_scalar(A, b, level, valid, u_star, v_max=1.0, om=1.5):
+def _check_against_scalar(A, b, level, valid, u_star, v_max=1.0, om=1.5, atol=1e-6):
     q = HierarchicalQP(v_max, om)
     res = BatchHierarchicalQP(v_max, om).solve(A, b, level, u_star, valid)
     names = res.status_names
     for r in range(A.shape[0]):
         v = valid[r]
         s = q.solve(A[r][v], b[r][v], level[r][v], u_star[r])
-        np.testing.assert_allclose(res.u[r], s.u, atol=1e-6, err_msg=f"robot {r}")
-        np.testing.assert_allclose(res.kappa[r][v], s.kappa, atol=1e-6)
+        np.testing.assert_allclose(res.u[r], s.u, atol=atol, err_msg=f"robot {r}")
+        np.testing.assert_allclose(res.kappa[r][v], s.kappa, atol=atol)
         assert not res.kappa[r][~v].any()
         assert names[r] == s.status, r
         assert res.fallback[r] == s.fallback
@@ -175,9 +175,16 @@ def test_hierarchy_matches_per_robot_solver_random():
 
 @settings(max_examples=30)
 @given(seed=st.integers(0, 2**31 - 1), K=st.integers(0, 14))
+@example(seed=1771, K=12)
 def test_hierarchy_property(seed, K):
+    """Random hierarchies agree within the cascade's check tolerance (1e-5, nnls
+    ``tol_check``). Found by hypothesis: seed 1771, K = 12, robot 2, a relaxed
+    four-level hierarchy on which the two solvers' round-off relaxations of the fixed
+    rows (``tol_fix`` = 1e-7 per level) compound to 2.9e-6 in u and 2.2e-6 in κ*; same
+    status and QP count. The recorded pfcbf problems and the 300 random ones above
+    still agree within 1e-6."""
     rng = np.random.default_rng(seed)
-    _check_against_scalar(*_random_hierarchy(rng, 6, K))
+    _check_against_scalar(*_random_hierarchy(rng, 6, K), atol=1e-5)
 
 
 def test_hierarchy_invalid_input_and_empty():

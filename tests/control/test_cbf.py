@@ -419,6 +419,7 @@ def test_row_authority_closed_form():
         ("lost_fov_age_s", -1.0),
         ("lost_fov_yield", 1),
         ("lost_fov_yield_latch", 1),
+        ("hold_band_barrier", 1),
         ("priority_hysteresis_m", -0.1),
         ("priority_hysteresis_m", float("nan")),
         ("undetected_quantile", "median"),

@@ -24,6 +24,7 @@ from fov_marl.control.safety import (
     blind_representatives,
     hold_band,
     neighbour_halfplanes,
+    neighbour_row_offsets,
     particle_halfplane_offsets,
     risk_quantile,
     safety_rows,
@@ -236,6 +237,57 @@ def test_hold_band_is_a_dead_zone():
     h = np.array([-1.0, -0.1, 0.0, 0.1, 0.3, 0.5])
     np.testing.assert_allclose(hold_band(h, 0.3), [-1.0, -0.1, 0.0, 0.0, 0.0, 0.2])
     np.testing.assert_array_equal(hold_band(h, 0.0), h)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    h=st.floats(-3.0, 6.0),
+    pred=st.one_of(st.none(), st.floats(-1.5, 1.5)),
+    band=st.floats(0.0, 1.0),
+    gain=st.floats(0.1, 5.0),
+    rho=st.floats(0.05, 1.0),
+)
+def test_neighbour_row_offsets_keep_the_barrier_and_the_band(h, pred, band, gain, rho):
+    """The row is the barrier with shared responsibility capped by the band's share:
+    never more approach than the barrier allows (so h_{k+1} >= (1 - γ dt) h_k when j
+    closes at what i assumes of it), none within the band, never more retreat than the
+    barrier demands, and exactly the barrier without a band or below D_s."""
+    hh = np.array(h)
+    p = None if pred is None else np.array(pred)
+    b = float(neighbour_row_offsets(hh, hold_band(hh, band), p, gain, rho))
+    share = (1.0 - rho) * gain * h
+    closing = share if pred is None else max(share, pred)
+    barrier = gain * h - closing
+    # the barrier holds: i's closing b plus j's assumed closing never exceed γ h, so
+    # one step of dt <= 1/γ keeps h >= 0
+    assert b + closing <= gain * h + 1e-12
+    if 0.0 <= h <= band:
+        assert b <= 1e-12  # no approach within the band
+        assert b >= min(0.0, barrier) - 1e-12  # ... and no retreat the barrier does not ask
+    if h > band:
+        assert b <= rho * gain * (h - band) + 1e-12
+    if band == 0.0 or h < 0.0:
+        assert b == pytest.approx(barrier, abs=1e-12)
+
+
+def test_neighbour_rows_in_the_band_do_not_demand_retreat_the_barrier_does_not():
+    """The traced case (pfcbf N = 6, β = 120°, seed 0, robot 1, step 940): a seen
+    neighbour 3 m away (h = 0.396 m) whose Eq. 20 prediction closes at 0.685 m/s. The
+    barrier leaves γ h − 0.685 = 0.305 m/s; the band caps approach at ρ γ (h − b) =
+    0.12 m/s. The earlier row (γ g − max((1 − ρ) γ g, p)) demanded retreat at 0.444."""
+    h, p = np.array(0.396), np.array(0.685)
+    g = hold_band(h, 0.3)
+    b = float(neighbour_row_offsets(h, g, p, 2.5, 0.5))
+    assert b == pytest.approx(0.5 * 2.5 * 0.096)
+    old = float(2.5 * g - max(0.5 * 2.5 * g, p))
+    assert old == pytest.approx(-0.445)
+    # within the band: hold unless j's predicted closing exceeds γ h
+    assert (
+        float(neighbour_row_offsets(np.array(0.2), np.array(0.0), np.array(0.3), 2.5, 0.5)) == 0.0
+    )
+    assert float(
+        neighbour_row_offsets(np.array(0.1), np.array(0.0), np.array(0.6), 2.5, 0.5)
+    ) == pytest.approx(0.25 - 0.6)
 
 
 def test_rows_of_a_detected_and_an_undetected_neighbour():
