@@ -309,6 +309,7 @@ class PfCbfPipeline:
         self._bearing_travel = np.zeros_like(self._bearing_travel)
         self._fov_lead = np.full(self.n_rows, -1, dtype=np.int64)
         self._yielded = np.zeros(self.n_rows, dtype=bool)
+        self._unblocked = np.zeros(self.n_rows, dtype=bool)
         self.counters = {"interventions": 0, "fallbacks": 0, "safety_fallbacks": 0}
         self.last_results = _LazyResults(None, self.n_rows)
         self.last_batch = None
@@ -390,6 +391,7 @@ class PfCbfPipeline:
         self._bearing_travel[rows] = 0.0
         self._fov_lead[rows] = -1
         self._yielded[rows] = False
+        self._unblocked[rows] = False
         if self.estimates == "tracker" and self.n > 1:
             init = self._known_init(init_all)
             self.bank.reset_copies(
@@ -660,6 +662,7 @@ class PfCbfPipeline:
                     priority_bonus=bonus,
                     glance=glance,
                     yield_latched=None if fov_yield is None else self._yielded,
+                    unblock_latched=self._unblocked,
                 )
                 results: Sequence[ControlResult | None] = _LazyResults(res, R)
             else:
@@ -678,6 +681,7 @@ class PfCbfPipeline:
                             priority_bonus=None if bonus is None else bonus[i],
                             glance=glance is not None and bool(glance[i]),
                             yield_latched=fov_yield is not None and bool(self._yielded[i]),
+                            unblock_latched=bool(self._unblocked[i]),
                         )
                     )
                 res = BatchControlResult.from_results(out, time.perf_counter() - t_rows)
@@ -697,6 +701,7 @@ class PfCbfPipeline:
                         results = _LazyResults(res, R)
             self._update_fov_lead(res.level, e["ids"])
             self._yielded = res.yielded.copy()
+            self._unblocked = res.unblocked.copy()
             self.last_batch = res
             self.last_results = results
             u = res.u.copy()

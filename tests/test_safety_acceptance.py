@@ -93,12 +93,13 @@ def test_settled_pfcbf_team_does_not_chatter():
     detection flickers changes its ellipse distance d, so the slack of Eq. 16 lets its
     FoV rows go and brings them back on alternate steps; steps 338-364). Over seeds 0-9,
     steps 200-1000, the latch lowers the ω flips from 94 to 86. Also on the neighbour
-    rows it was measured with (``hold_band_barrier`` off): the shipped rows send seed 1
-    on another course with 2 flips here, while over seeds 0-9, steps 200-1000, they cut
+    rows it was measured with (``hold_band_barrier`` off) and without keep-right's
+    hysteresis (``deadlock_release`` 0.2): the shipped rows send seed 1 on another
+    course with 2 flips here, while over seeds 0-9, steps 200-1000, they cut
     the flips from 66 / 66 / 139 (vx / vy / ω) to 13 / 9 / 59."""
     from fov_marl.metrics import action_chatter
 
-    latch = {"lost_fov_yield_latch": False, "hold_band_barrier": False}
+    latch = {"lost_fov_yield_latch": False, "hold_band_barrier": False, "deadlock_release": 0.2}
     kept = action_chatter(_pfcbf_actions(1, 600, **latch)[200:])
     swapped = action_chatter(_pfcbf_actions(1, 600, priority_hysteresis_m=0.0, **latch)[200:])
     assert kept.sum() <= 1, kept
@@ -112,15 +113,30 @@ def test_lost_fov_yield_latch_stops_a_pinned_robot_turning_back_and_forth():
     right at ω_max, which pinned it again (5 ω flips in those 20 steps, 7 over the last
     250). The latch (``lost_fov_yield_latch``) keeps the yield while u* translates. On
     the budget leak the episode was found with (30 s; pfcbf's 120 s sends it elsewhere)
-    and on the neighbour rows of then (``hold_band_barrier`` off: the shipped rows send
-    it elsewhere too, with no flips either way)."""
+    and on the neighbour rows and keep-right of then (``hold_band_barrier`` off,
+    ``deadlock_release`` 0.2: the shipped ones send it elsewhere too, with no flips
+    either way)."""
     from fov_marl.metrics import action_chatter
 
-    leak = {"blind_travel_memory_s": 30.0, "hold_band_barrier": False}
+    leak = {"blind_travel_memory_s": 30.0, "hold_band_barrier": False, "deadlock_release": 0.2}
     latched = action_chatter(_pfcbf_actions(3, 945, **leak)[925:])
     unlatched = action_chatter(_pfcbf_actions(3, 945, lost_fov_yield_latch=False, **leak)[925:])
     assert latched.sum() == 0, latched
     assert unlatched[2] >= 4, unlatched  # the counterfactual chatters
+
+
+def test_keep_right_hysteresis_stops_a_robot_flipping_vx():
+    """Seed 5 (N = 6, β = 120°), robot 0 at steps 758-764: u* small (0.15 m/s), blind
+    rows binding, the solution kept about a fifth of u*'s progress, so "keep right"
+    (``deadlock_turn_deg``) was adopted on alternate steps and vx flipped between +0.1
+    and −0.07 m/s (the slow chatter test's 7 vx flips). With the hysteresis
+    (``deadlock_release`` 0.5) no flip in vx over the last 250 steps; without it, 7."""
+    from fov_marl.metrics import action_chatter
+
+    kept = action_chatter(_pfcbf_actions(5, 1000)[750:])
+    flips = action_chatter(_pfcbf_actions(5, 1000, deadlock_release=0.2)[750:])
+    assert kept[0] == 0, kept
+    assert flips[0] >= 4, flips  # the counterfactual flips
 
 
 def _stress(episode, tracker=None, **controller):
@@ -164,10 +180,11 @@ def test_filter_wait_charge_regression_collides_with_yield_and_sigma_cut():
     # on the filter it was found with (1 m blind travel budget; with the shipped 0.5 m this
     # episode keeps clear even with both ablations on)
     # (and before the FoV lead's hysteresis, and before the yield's latch, which sends it
-    # on a course that stays clear)
+    # on a course that stays clear; and on the neighbour rows of then, hold_band_barrier)
     cp = {
         "lost_fov_yield": True,
         "lost_fov_yield_latch": False,
+        "hold_band_barrier": False,
         "lost_sigma_max_m": 2.0,
         "blind_travel_m": 1.0,
         "priority_hysteresis_m": 0.0,
@@ -516,11 +533,6 @@ def test_pfcbf_settles_in_every_seed_and_matches_ideal():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="known issue: 12 ω flips (and 1 in vy) with pfcbf's 120 s budget leak; seed 0, "
-    "robot 1, steps 940-955 holds 7 of them (not traced); see the CHANGELOG",
-)
 def test_settled_pfcbf_teams_do_not_chatter_in_any_seed():
     """Seeds 0-9, the last 250 of 1000 steps: period-2 turns of ω in at most 10 of the
     15,000 robot-steps, none in vx, vy. Measured: 6 when the bound was set; 81 without the
@@ -529,8 +541,11 @@ def test_settled_pfcbf_teams_do_not_chatter_in_any_seed():
     latch (seed 0: 5, one of them a single safe-fallback step; seeds 2 and 9: 2 each).
     With pfcbf's budget leak at 120 s (the creep fix) the courses change: 12 ω flips
     (seed 0: 9, of which robot 1 at steps 940-955: 7; seed 6: 2; seed 3: 1) and one vy
-    flip (seed 9). Strict xfail: it fails the suite once it passes, so the bound comes
-    back into force."""
+    flip (seed 9). With the hold band that never demands more retreat than the barrier
+    (``hold_band_barrier``): 7 / 0 / 11 (vx / vy / ω; seed 5's robot 0 kept right on
+    alternate steps); with keep-right's hysteresis (``deadlock_release``) as well:
+    0 / 0 / 2 (seeds 2 and 3), and over steps 200-1000 7 / 2 / 32 against 66 / 66 / 139
+    before both."""
     from fov_marl.metrics import action_chatter
 
     total = sum(action_chatter(_pfcbf_actions(seed, 1000)[-250:]) for seed in range(10))

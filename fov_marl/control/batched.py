@@ -41,7 +41,7 @@ from fov_marl.control.controller import (
     hold_cleanup,
     safe_fallback_inputs,
 )
-from fov_marl.control.params import ControllerParams
+from fov_marl.control.params import STALL_FRACTION, TRANSLATES_FRACTION, ControllerParams
 from fov_marl.control.safety import SafetyRows, arc_yaw_guard, team_safety_rows
 
 __all__ = ["BatchControlResult", "BatchedFovCbfController", "CONTROL_STATUSES"]
@@ -53,13 +53,22 @@ CONTROL_STATUSES = STATUS_CODES + ("safety_fallback",)
 _UNC, _INV, _FAIL, _SFB = 0, 4, 5, 6
 
 
-def _stalled(u: np.ndarray, u_star: np.ndarray, v_max: float) -> np.ndarray:
-    """``(R,)`` robots whose solution keeps less than a fifth of u*'s translation
-    (``u_v · v̂* < 0.2 ‖v*‖``, with ``‖v*‖ ≥ 0.1 v_max``): the trigger of "keep right"
-    and of the lost neighbours' yield (:meth:`FovCbfController._stalled`)."""
+def _translates(u_star: np.ndarray, v_max: float) -> np.ndarray:
+    """``(R,)`` u* translates: ``‖v*‖ ≥ 0.1 v_max`` (:meth:`FovCbfController._translates`)."""
+    return np.hypot(u_star[:, 0], u_star[:, 1]) >= TRANSLATES_FRACTION * v_max
+
+
+def _stalled(
+    u: np.ndarray, u_star: np.ndarray, v_max: float, fraction: float | np.ndarray = STALL_FRACTION
+) -> np.ndarray:
+    """``(R,)`` robots whose solution keeps less than ``fraction`` (a fifth, or ``(R,)``)
+    of u*'s translation (``u_v · v̂* < 0.2 ‖v*‖``) while u* translates: the trigger of
+    "keep right" and of the lost neighbours' yield (:meth:`FovCbfController._stalled`)."""
     vs = u_star[:, :2]
     speed = np.hypot(vs[:, 0], vs[:, 1])
-    return (speed >= 0.1 * v_max) & (np.einsum("rk,rk->r", u[:, :2], vs) < 0.2 * speed * speed)
+    return (speed >= TRANSLATES_FRACTION * v_max) & (
+        np.einsum("rk,rk->r", u[:, :2], vs) < fraction * speed * speed
+    )
 
 
 def _adopt(qres, alt, rows: np.ndarray, use: np.ndarray) -> None:
@@ -79,7 +88,7 @@ class BatchControlResult:
     :data:`CONTROL_STATUSES` (``status_names``: the strings), ``fallback``, ``intervened``
     ``(R,)`` bool, ``kappa``, ``active``, ``level`` ``(R, M, 4)``, ``n_levels``, ``n_qp``
     ``(R,)`` int, ``qp_status (R,)`` object, ``safety_violation``, ``cone_violation`` ``(R,)``,
-    ``yielded (R,)`` bool, and ``timings`` (team seconds: ``rows``, ``cascade``, ``total``).
+    ``yielded (R,)`` bool, ``unblocked (R,)`` bool, and ``timings`` (team seconds: ``rows``, ``cascade``, ``total``).
     """
 
     u: np.ndarray
@@ -97,6 +106,7 @@ class BatchControlResult:
     cone_violation: np.ndarray
     yielded: np.ndarray
     timings: dict
+    unblocked: np.ndarray | None = None
 
     @property
     def n_robots(self) -> int:
@@ -125,6 +135,7 @@ class BatchControlResult:
             safety_violation=float(self.safety_violation[i]),
             cone_violation=float(self.cone_violation[i]),
             yielded=bool(self.yielded[i]),
+            unblocked=self.unblocked is not None and bool(self.unblocked[i]),
             timings=share,
         )
 
@@ -148,6 +159,7 @@ class BatchControlResult:
             cone_violation=np.array([r.cone_violation for r in results]),
             yielded=np.array([r.yielded for r in results], dtype=bool),
             timings={"rows": 0.0, "cascade": 0.0, "total": t_total},
+            unblocked=np.array([r.unblocked for r in results], dtype=bool),
         )
 
 
@@ -310,6 +322,7 @@ class BatchedFovCbfController:
         priority_bonus: np.ndarray | None = None,
         glance: np.ndarray | None = None,
         yield_latched: np.ndarray | None = None,
+        unblock_latched: np.ndarray | None = None,
     ) -> BatchControlResult:
         """``FovCbfController.solve`` for every robot (arguments with a leading robot axis).
 
@@ -319,7 +332,8 @@ class BatchedFovCbfController:
             :class:`~fov_marl.control.safety.SafetyRows` (or ``(A (R,K,3), b (R,K),
             kind (R,K))``; None: from ``p_body`` as exact); detected: ``(R, M)`` bool or None;
             fov_yield: ``(R, M)`` bool or None; priority_bonus: ``(R, M)`` m or None;
-            glance, yield_latched: ``(R,)`` bool or None (see ``FovCbfController.solve``).
+            glance, yield_latched, unblock_latched: ``(R,)`` bool or None (see
+            ``FovCbfController.solve``).
 
         Raises:
             ValueError: shapes that do not match.
@@ -362,6 +376,12 @@ class BatchedFovCbfController:
             yield_latched = np.asarray(yield_latched, dtype=bool)
             if yield_latched.shape != (R,):
                 raise ValueError(f"yield_latched must have shape ({R},), got {yield_latched.shape}")
+        if unblock_latched is not None:
+            unblock_latched = np.asarray(unblock_latched, dtype=bool)
+            if unblock_latched.shape != (R,):
+                raise ValueError(
+                    f"unblock_latched must have shape ({R},), got {unblock_latched.shape}"
+                )
         if p.qp_backend != "nnls":
             return self._solve_loop(
                 u_star,
@@ -376,6 +396,7 @@ class BatchedFovCbfController:
                 glance,
                 priority_bonus,
                 yield_latched,
+                unblock_latched,
             )
         self.stats["steps"] += R
         finite = (
@@ -436,6 +457,7 @@ class BatchedFovCbfController:
         n_relaxed = 0
         cone_v = np.zeros(R)
         yielded = np.zeros(R, dtype=bool)
+        unblocked = np.zeros(R, dtype=bool)
         level_out = level_all
         if qi.size:
             nq = qi.size
@@ -468,7 +490,10 @@ class BatchedFovCbfController:
             usq = us[qi]
             qres = self._qp_solve(Aq, bq, lv, actq, usq)
             if K and p.deadlock_turn_deg > 0.0:
-                self._unblock(qres, Aq, bq, lv, actq, usq, n_fov_slots, skeep[qi])
+                ulatch = None if unblock_latched is None else unblock_latched[qi]
+                unblocked[qi] = self._unblock(
+                    qres, Aq, bq, lv, actq, usq, n_fov_slots, skeep[qi], ulatch
+                )
             if fov_yield is not None and fov_yield[qi].any():
                 lost = np.zeros(actq.shape, dtype=bool)
                 fov_slot = np.tile(_FOV_ROWS, M)  # never an Eq. 12 safety row
@@ -530,6 +555,7 @@ class BatchedFovCbfController:
             safety_v[bad] = 0.0
             cone_v[bad] = 0.0
             yielded[bad] = False
+            unblocked[bad] = False
         st = self.stats
         st["qp_solves"] += int(n_qp.sum())
         st["fallbacks"] += int(fallback.sum())
@@ -551,20 +577,31 @@ class BatchedFovCbfController:
             cone_violation=cone_v,
             yielded=yielded,
             timings={"rows": t1 - t0, "cascade": t2 - t1, "total": time.perf_counter() - t0},
+            unblocked=unblocked,
         )
 
-    def _unblock(self, qres, Aq, bq, lv, actq, usq, n_fov, skeep) -> None:
-        """:meth:`FovCbfController._unblock` for the robots that need it (in place on qres)."""
+    def _unblock(self, qres, Aq, bq, lv, actq, usq, n_fov, skeep, latched=None) -> np.ndarray:
+        """:meth:`FovCbfController._unblock` for the robots that need it (in place on qres);
+        ``latched``: ``(nq,)`` bool or None, its hysteresis. Returns ``(nq,)`` bool, the
+        robots that kept right."""
         vs = usq[:, :2]
         u = qres.u
-        cand = _stalled(u, usq, self.config.v_max_mps) & ~qres.fallback & skeep.any(axis=1)
+        out = np.zeros(u.shape[0], dtype=bool)
+        fraction = (
+            STALL_FRACTION
+            if latched is None
+            else np.where(latched, self.params.deadlock_release, STALL_FRACTION)
+        )
+        cand = (
+            _stalled(u, usq, self.config.v_max_mps, fraction) & ~qres.fallback & skeep.any(axis=1)
+        )
         if not cand.any():
-            return
+            return out
         srow = np.einsum("rkn,rn->rk", Aq[:, n_fov:], u) + bq[:, n_fov:]
         binding = ((srow < 1e-3) & actq[:, n_fov:]).any(axis=1)
         cand &= binding
         if not cand.any():
-            return
+            return out
         c_i = np.flatnonzero(cand)
         a = -math.radians(self.params.deadlock_turn_deg)
         c, s_ = math.cos(a), math.sin(a)
@@ -575,8 +612,10 @@ class BatchedFovCbfController:
         gain_cur = np.einsum("rk,rk->r", u[c_i, :2], u_turn[:, :2])
         use = ~alt.fallback & ~(gain_alt <= gain_cur + 1e-9)
         if not use.any():
-            return
+            return out
         _adopt(qres, alt, c_i[use], use)
+        out[c_i[use]] = True
+        return out
 
     def _yield_lost(self, qres, Aq, bq, lv, actq, usq, lost, latched=None) -> np.ndarray:
         """:meth:`FovCbfController._yield_lost` for the robots that need it (in place on qres);
@@ -584,7 +623,7 @@ class BatchedFovCbfController:
         u = qres.u
         trigger = _stalled(u, usq, self.config.v_max_mps)
         if latched is not None and self.params.lost_fov_yield_latch:
-            moving = np.hypot(usq[:, 0], usq[:, 1]) >= 0.1 * self.config.v_max_mps
+            moving = _translates(usq, self.config.v_max_mps)
             trigger = np.where(latched, moving, trigger)
         cand = trigger & ~qres.fallback & lost.any(axis=1)
         yielded = np.zeros(u.shape[0], dtype=bool)
@@ -614,7 +653,7 @@ class BatchedFovCbfController:
 
     def _solve_loop(
         self, u_star, p_body, v_est, d, ids, safety, detected, t0, fov_yield=None, glance=None,
-        bonus=None, latched=None,
+        bonus=None, latched=None, unblock_latched=None,
     ):  # fmt: skip
         """One per-robot controller per robot (the osqp backend)."""
         R = u_star.shape[0]
@@ -634,6 +673,7 @@ class BatchedFovCbfController:
                     priority_bonus=None if bonus is None else bonus[i],
                     glance=False if glance is None else bool(glance[i]),
                     yield_latched=False if latched is None else bool(latched[i]),
+                    unblock_latched=False if unblock_latched is None else bool(unblock_latched[i]),
                 )
             )  # fmt: skip
         for k in self.stats:

@@ -88,7 +88,7 @@ from fov_marl.control.cbf import (
     normalise_rows,
     row_h_max,
 )
-from fov_marl.control.params import ControllerParams
+from fov_marl.control.params import STALL_FRACTION, TRANSLATES_FRACTION, ControllerParams
 from fov_marl.control.qp import HierarchicalQP
 from fov_marl.control.safety import ROW_CONE, ROW_WALL, arc_yaw_guard, team_safety_rows
 
@@ -258,6 +258,8 @@ class ControlResult:
         yielded: the FoV rows of lost neighbours yielded this step
             (:meth:`FovCbfController._yield_lost`); the pipeline passes it back as the
             next step's ``yield_latched``.
+        unblocked: "keep right" was adopted this step (:meth:`FovCbfController._unblock`);
+            the pipeline passes it back as the next step's ``unblock_latched``.
         timings: seconds spent in ``rows`` (assembly, pruning, levels), ``cascade``,
             ``final`` (only after a failed level), ``total``.
     """
@@ -276,6 +278,7 @@ class ControlResult:
     safety_violation: float = 0.0
     cone_violation: float = 0.0
     yielded: bool = False
+    unblocked: bool = False
     timings: dict = field(default_factory=dict)
 
 
@@ -474,14 +477,22 @@ class FovCbfController:
         res.u = u
         return res
 
-    def _stalled(self, u: np.ndarray, u_star: np.ndarray) -> bool:
-        """The solution keeps less than a fifth of u*'s translation (``u_v · v̂* < 0.2 ‖v*‖``,
-        with ``‖v*‖ ≥ 0.1 v_max``): the trigger of :meth:`_unblock` and :meth:`_yield_lost`."""
+    def _translates(self, u_star: np.ndarray) -> bool:
+        """u* translates: ``‖v*‖ ≥ 0.1 v_max`` (``TRANSLATES_FRACTION``)."""
+        return math.hypot(u_star[0], u_star[1]) >= TRANSLATES_FRACTION * self.config.v_max_mps
+
+    def _stalled(self, u: np.ndarray, u_star: np.ndarray, fraction: float = STALL_FRACTION) -> bool:
+        """The solution keeps less than ``fraction`` (a fifth) of u*'s translation
+        (``u_v · v̂* < 0.2 ‖v*‖``) while u* translates: the trigger of :meth:`_unblock` and
+        :meth:`_yield_lost`."""
         vs = u_star[:2]
         speed = math.hypot(vs[0], vs[1])
-        return speed >= 0.1 * self.config.v_max_mps and u[:2] @ vs < 0.2 * speed * speed
+        return (
+            speed >= TRANSLATES_FRACTION * self.config.v_max_mps
+            and u[:2] @ vs < fraction * speed * speed
+        )
 
-    def _unblock(self, qres, A_q, b_q, l_q, u_star: np.ndarray, n_fov: int):
+    def _unblock(self, qres, A_q, b_q, l_q, u_star: np.ndarray, n_fov: int, latched=False):
         """Deadlock resolution ("keep right", not in the paper): ``params.deadlock_turn_deg``.
 
         Symmetric encounters (four robots crossing at one point, VII-D) stop every robot
@@ -492,9 +503,18 @@ class FovCbfController:
         solution is used if it progresses more along the turned direction. All robots
         turning the same way circulate around each other like a roundabout. Only u* is
         changed: every row still holds (the result is a solution of the same hierarchy).
+
+        Hysteresis (``latched``: the robot kept right at the previous step): it keeps
+        right while the solution for u* keeps less than ``params.deadlock_release`` (0.5)
+        of u*'s progress, not 0.2. Without it a robot whose u* was small and whose
+        solution kept about a fifth of it kept right on alternate steps, the turned u*
+        flipping the sign of vx each time (traced: pfcbf, N = 6, β = 120°, seed 5, robot
+        0, steps 758-764; over seeds 0-9, steps 200-1000, 34 of 81 period-2 flips came
+        with keep-right adopted on alternate steps).
         """
         vs = u_star[:2]
-        if qres.fallback or not self._stalled(qres.u, u_star):
+        fraction = self.params.deadlock_release if latched else STALL_FRACTION
+        if qres.fallback or not self._stalled(qres.u, u_star, fraction):
             return qres
         binding = (A_q[n_fov:] @ qres.u + b_q[n_fov:]) < 1e-3
         if not binding.any():
@@ -557,7 +577,7 @@ class FovCbfController:
         if not lost.any() or qres.fallback:
             return qres
         if latched and self.params.lost_fov_yield_latch:
-            trigger = math.hypot(u_star[0], u_star[1]) >= 0.1 * self.config.v_max_mps
+            trigger = self._translates(u_star)
         else:
             trigger = self._stalled(qres.u, u_star)
         if not trigger:
@@ -627,6 +647,7 @@ class FovCbfController:
         priority_bonus: np.ndarray | None = None,
         glance: bool = False,
         yield_latched: bool = False,
+        unblock_latched: bool = False,
     ) -> ControlResult:
         """Safe input closest to u* (Eq. 19) under the hierarchy of Eq. 18.
 
@@ -654,6 +675,8 @@ class FovCbfController:
                 exactly as safe.
             yield_latched: the lost FoV rows yielded at the previous step (that step's
                 ``ControlResult.yielded``): the latch of :meth:`_yield_lost`.
+            unblock_latched: the robot kept right at the previous step (that step's
+                ``ControlResult.unblocked``): the hysteresis of :meth:`_unblock`.
 
         Returns:
             :class:`ControlResult`. Non-finite inputs and solver failures give a
@@ -762,7 +785,8 @@ class FovCbfController:
         base = qres
         yielded = False
         if sb.size and p.deadlock_turn_deg > 0.0:
-            qres = self._unblock(qres, A_q, b_q, l_q, u_star, n_fov)
+            qres = self._unblock(qres, A_q, b_q, l_q, u_star, n_fov, unblock_latched)
+        unblocked = qres is not base
         if fov_yield is not None:
             lost = np.zeros(b_q.shape[0], dtype=bool)
             lost[: jj.size] = np.asarray(fov_yield, dtype=bool).reshape(-1)[jj] & (rr != SAFETY_ROW)
@@ -812,6 +836,7 @@ class FovCbfController:
             safety_violation=max(float(kappa[:, SAFETY_ROW].max(initial=0.0)), safety_kappa),
             cone_violation=float(qres.kappa[jj.size : n_fov].max(initial=0.0)),
             yielded=yielded,
+            unblocked=unblocked,
             timings={
                 "rows": t1 - t0,
                 "cascade": qres.t_cascade_s,

@@ -138,6 +138,11 @@ field                        default   source / reason
                                        FovCbfController._unblock`): four crossing robots
                                        otherwise stop for good at the centre (VII-D,
                                        seed 0); 0 disables (the safety filter's default)
+``deadlock_release``         0.5       hysteresis of "keep right": a robot that kept
+                                       right keeps right until its solution keeps this
+                                       share of u*'s progress (entered below 0.2);
+                                       without it a robot near the threshold kept right
+                                       on alternate steps and vx flipped sign
 ``lost_sigma_max_m``         inf       an undetected neighbour whose Gaussian fit has a std
                                        along the line of sight above this (m) gets no
                                        neighbour row; its particles, density and
@@ -312,7 +317,13 @@ from typing import Any
 from fov_marl.config import ConfigError
 from fov_marl.validation import check_bool, check_int, check_real
 
-__all__ = ["ControllerParams"]
+__all__ = ["ControllerParams", "STALL_FRACTION", "TRANSLATES_FRACTION"]
+
+#: u* translates from this share of v_max on (the stall test, the yield's latch)
+TRANSLATES_FRACTION = 0.1
+#: the stall test of "keep right" and of the lost rows' yield: the solution keeps less
+#: than this share of u*'s progress (``u_v · v̂* < 0.2 ‖v*‖``)
+STALL_FRACTION = 0.2
 
 
 def _check(name: str, value: Any, lo: float, hi: float, *, lo_open: bool = False) -> None:
@@ -366,6 +377,9 @@ class ControllerParams:
         wall_gain: γ_w (1/s) of the wall rows, (0, 1e3]; used as ``min(γ_w, 1/dt)``.
         deadlock_turn_deg: turn of u*'s translation (degrees, to the right) tried when
             the collision rows block it, in [0, 180]; 0 disables.
+        deadlock_release: in [0.2, 1]: a robot that kept right at the previous step
+            keeps right while its solution keeps less than this fraction of u*'s
+            progress (a first keep-right needs less than 0.2); 0.2: no hysteresis.
         lost_sigma_max_m: (0, 1e6] or inf (off); undetected neighbours with a larger std along the
             line of sight (m) get no neighbour row.
         undetected_quantile: ``"gaussian"`` or ``"particles"``, the lines of undetected
@@ -462,6 +476,7 @@ class ControllerParams:
     walls: bool = True
     wall_gain: float = 2.5
     deadlock_turn_deg: float = 60.0
+    deadlock_release: float = 0.5
     lost_fov_yield: bool = True
     lost_fov_yield_latch: bool = True
     lost_fov_age_s: float = 10.0
@@ -566,6 +581,7 @@ class ControllerParams:
             "blind_travel_memory_s", self.blind_travel_memory_s, 0.0, 1e6, lo_open=True, inf_ok=True
         )
         _check("deadlock_turn_deg", self.deadlock_turn_deg, 0.0, 180.0)
+        _check("deadlock_release", self.deadlock_release, STALL_FRACTION, 1.0)
         _check("lost_fov_age_s", self.lost_fov_age_s, 0.0, 1e6)
         _check("priority_hysteresis_m", self.priority_hysteresis_m, 0.0, 100.0)
         _check("omega_weight", self.omega_weight, 0.0, 10.0, lo_open=True)

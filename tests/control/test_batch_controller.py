@@ -62,7 +62,7 @@ def _tie(s, r, safety, i, tol=1e-3):
 
 def assert_same(
     cfg, params, u, p, v, d, ids, safety, det, max_ties=0, fov_yield=None, bonus=None, glance=None,
-    latched=None,
+    latched=None, unblock=None,
 ):  # fmt: skip
     """Batched result == per-robot results (1e-6, identical statuses and flags), except
     for at most ``max_ties`` robots whose solutions are degenerate ties (:func:`_tie`)."""
@@ -71,7 +71,7 @@ def assert_same(
     batched = BatchedFovCbfController(cfg, params)
     rb = batched.solve(
         u, p, v, d, ids, safety=safety, detected=det, fov_yield=fov_yield, priority_bonus=bonus,
-        glance=glance, yield_latched=latched,
+        glance=glance, yield_latched=latched, unblock_latched=unblock,
     )  # fmt: skip
     ctrls = [FovCbfController(cfg, params) for _ in range(R)]
     statuses = []
@@ -84,6 +84,7 @@ def assert_same(
             priority_bonus=None if bonus is None else bonus[i],
             glance=glance is not None and bool(glance[i]),
             yield_latched=latched is not None and bool(latched[i]),
+            unblock_latched=unblock is not None and bool(unblock[i]),
         )  # fmt: skip
         r = rb.robot(i)
         ctx = f"robot {i}: {s.status} vs {r.status}"
@@ -98,6 +99,7 @@ def assert_same(
         assert r.status == s.status, ctx
         assert r.fallback == s.fallback and r.intervened == s.intervened, ctx
         assert r.yielded == s.yielded, ctx
+        assert r.unblocked == s.unblocked, ctx
         np.testing.assert_allclose(r.kappa, s.kappa, atol=1e-6, err_msg=ctx)
         np.testing.assert_array_equal(r.active, s.active)
         np.testing.assert_array_equal(r.level, s.level)
@@ -223,6 +225,33 @@ def test_deadlock_unblock_and_safety_fallback_paths():
     turned = np.abs(r_on.u - r_off.u).max(axis=1) > 1e-3
     assert turned.any()
     assert np.all(r_on.u[turned, 1] < r_off.u[turned, 1] + 1e-9)  # to the right
+
+
+def test_keep_right_hysteresis_batched_equals_loop():
+    """Robots blocked ahead to various degrees (rows ``vx ≤ c`` with c from 0 to 0.4
+    m/s, u* 0.5 m/s forward), latched at random: the batched keep-right and its
+    hysteresis equal the per-robot ones, and the latch changes some robots."""
+    cfg = make_config()
+    params = ControllerParams()
+    R = 24
+    rng = np.random.default_rng(7)
+    c = np.linspace(0.0, 0.4, R)
+    from fov_marl.control.safety import SafetyRows
+
+    A = np.broadcast_to(np.array([[-1.0, 0.0, 0.0]]), (R, 1, 3)).copy()
+    rows = SafetyRows(A, c[:, None], np.zeros((R, 1), np.int8), np.ones((R, 1)))
+    u = np.tile([0.5, 0.0, 0.2], (R, 1))
+    p, v, d = np.zeros((R, 0, 2)), np.zeros((R, 0, 2)), np.zeros((R, 0))
+    latched = rng.random(R) < 0.5
+    assert_same(cfg, params, u, p, v, d, None, rows, None, unblock=latched)
+    on = BatchedFovCbfController(cfg, params).solve(
+        u, p, v, d, safety=rows, unblock_latched=latched
+    )
+    off = BatchedFovCbfController(cfg, params).solve(u, p, v, d, safety=rows)
+    changed = on.unblocked & ~off.unblocked
+    assert changed.any() and np.all(latched[changed])
+    frac = np.minimum(c, 0.5) / 0.5  # the kept share of u*'s progress
+    assert np.all((frac[changed] >= 0.2 - 1e-9) & (frac[changed] < 0.5 + 1e-9))
 
 
 def test_lost_fov_yield_batched_equals_loop_and_unpins():

@@ -420,6 +420,8 @@ def test_row_authority_closed_form():
         ("lost_fov_yield", 1),
         ("lost_fov_yield_latch", 1),
         ("hold_band_barrier", 1),
+        ("deadlock_release", 0.1),
+        ("deadlock_release", 1.5),
         ("priority_hysteresis_m", -0.1),
         ("priority_hysteresis_m", float("nan")),
         ("undetected_quantile", "median"),

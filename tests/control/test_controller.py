@@ -529,3 +529,47 @@ def test_yield_resolve_skipped_by_the_bound_gives_the_same_actions(monkeypatch):
     slow, n_slow = episode()
     np.testing.assert_array_equal(fast, slow)
     assert n_fast < 0.95 * n_slow, (n_fast, n_slow)
+
+
+def _keep_right_case():
+    """u* = 0.5 m/s forward, one collision row ``vx ≤ 0.15`` (binding): the solution
+    keeps 0.3 of u*'s progress, between the stall test's 0.2 and the release's 0.5."""
+    cfg = make_config()
+    u = np.array([0.5, 0.0, 0.0])
+    none2 = np.zeros((0, 2))
+    rows = (np.array([[-1.0, 0.0, 0.0]]), np.array([0.15]), np.zeros(1, np.int8))
+    return cfg, u, (none2, none2, np.zeros(0)), rows
+
+
+def test_keep_right_has_hysteresis():
+    """``deadlock_release``: a robot that kept right at the previous step keeps right
+    until its solution for u* keeps half of u*'s progress; a first keep-right needs
+    less than a fifth. Without it a robot near the threshold kept right on alternate
+    steps and vx flipped sign (pfcbf, seed 5, robot 0, steps 758-764)."""
+    cfg, u, (p, v, d), rows = _keep_right_case()
+    c = FovCbfController(cfg, ControllerParams())
+    fresh = c.solve(u, p, v, d, safety=rows)
+    np.testing.assert_allclose(fresh.u, [0.15, 0.0, 0.0], atol=1e-6)  # 0.3 of u*: not stalled
+    assert not fresh.unblocked
+    held = c.solve(u, p, v, d, safety=rows, unblock_latched=True)
+    assert held.unblocked
+    assert held.u[1] < -0.3  # turned right (−60°), the row still holds
+    assert held.u[0] <= 0.15 + 1e-6
+    # a first keep-right still needs the stall test: a tighter row (0.05 of u*)
+    tight = (rows[0], np.array([0.01]), rows[2])
+    first = c.solve(u, p, v, d, safety=tight)
+    assert first.unblocked and first.u[1] < -0.3
+    # no hysteresis (release = the stall test's 0.2): latched is as unlatched
+    off = FovCbfController(cfg, ControllerParams(deadlock_release=0.2))
+    r = off.solve(u, p, v, d, safety=rows, unblock_latched=True)
+    np.testing.assert_array_equal(r.u, fresh.u)
+    assert not r.unblocked
+    # u* that no longer translates ends it
+    still = np.array([0.04, 0.0, 0.0])
+    r = c.solve(still, p, v, d, safety=rows, unblock_latched=True)
+    assert not r.unblocked
+    # released once the solution keeps half of u*'s progress
+    loose = (rows[0], np.array([0.3]), rows[2])
+    r = c.solve(u, p, v, d, safety=loose, unblock_latched=True)
+    assert not r.unblocked
+    np.testing.assert_allclose(r.u, [0.3, 0.0, 0.0], atol=1e-6)
