@@ -30,6 +30,10 @@ _BEFORE_CONE = {
     "blind_travel_view_deg": 10.0,
     "blind_travel_memory_s": 30.0,
     "look_yields_fov": False,
+    # and the neighbour rows' hold band and keep-right as they were (before
+    # hold_band_barrier and deadlock_release), so the counterfactuals keep their courses
+    "hold_band_barrier": False,
+    "deadlock_release": 0.2,
 }
 
 
@@ -180,11 +184,10 @@ def test_filter_wait_charge_regression_collides_with_yield_and_sigma_cut():
     # on the filter it was found with (1 m blind travel budget; with the shipped 0.5 m this
     # episode keeps clear even with both ablations on)
     # (and before the FoV lead's hysteresis, and before the yield's latch, which sends it
-    # on a course that stays clear; and on the neighbour rows of then, hold_band_barrier)
+    # on a course that stays clear)
     cp = {
         "lost_fov_yield": True,
         "lost_fov_yield_latch": False,
-        "hold_band_barrier": False,
         "lost_sigma_max_m": 2.0,
         "blind_travel_m": 1.0,
         "priority_hysteresis_m": 0.0,
@@ -504,12 +507,17 @@ def test_pfcbf_budget_leak_blocks_a_slow_blind_creep(memory_s, collides):
     """N = 48, seed 4, with the tracker's bias test on (its course): with the budget's
     30 s leak a robot crept blind at 0.03 m/s (0.9 m of a 1 m budget in steady state) into
     a neighbour whose belief it held 24 m off (min 0.60 m); pfcbf's 120 s leak blocks a
-    creep above 0.0083 m/s (min 2.32 m)."""
+    creep above 0.0083 m/s (min 2.32 m). The counterfactual runs on the neighbour rows
+    and keep-right it was found with (``hold_band_barrier`` off, ``deadlock_release``
+    0.2)."""
+    cp = {"blind_travel_memory_s": memory_s}
+    if collides:
+        cp.update(hold_band_barrier=False, deadlock_release=0.2)
     rec = _coverage(
         48, 4,
         policy_kwargs={
             "tracker_params": {"recovery_bias_alpha": 0.2},
-            "controller_params": {"blind_travel_memory_s": memory_s},
+            "controller_params": cp,
         },
     )  # fmt: skip
     assert (rec.collisions > 0) == collides, rec
