@@ -88,7 +88,8 @@ class BatchControlResult:
     :data:`CONTROL_STATUSES` (``status_names``: the strings), ``fallback``, ``intervened``
     ``(R,)`` bool, ``kappa``, ``active``, ``level`` ``(R, M, 4)``, ``n_levels``, ``n_qp``
     ``(R,)`` int, ``qp_status (R,)`` object, ``safety_violation``, ``cone_violation`` ``(R,)``,
-    ``yielded (R,)`` bool, ``unblocked (R,)`` bool, and ``timings`` (team seconds: ``rows``, ``cascade``, ``total``).
+    ``yielded (R,)`` bool, ``unblocked (R,)`` bool (None from older callers: taken as
+    False), and ``timings`` (team seconds: ``rows``, ``cascade``, ``total``).
     """
 
     u: np.ndarray
