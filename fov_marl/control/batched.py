@@ -88,8 +88,7 @@ class BatchControlResult:
     :data:`CONTROL_STATUSES` (``status_names``: the strings), ``fallback``, ``intervened``
     ``(R,)`` bool, ``kappa``, ``active``, ``level`` ``(R, M, 4)``, ``n_levels``, ``n_qp``
     ``(R,)`` int, ``qp_status (R,)`` object, ``safety_violation``, ``cone_violation`` ``(R,)``,
-    ``yielded (R,)`` bool, ``unblocked (R,)`` bool (None from older callers: taken as
-    False), and ``timings`` (team seconds: ``rows``, ``cascade``, ``total``).
+    ``yielded (R,)`` bool, ``unblocked (R,)`` bool, and ``timings`` (team seconds: ``rows``, ``cascade``, ``total``).
     """
 
     u: np.ndarray
@@ -106,8 +105,8 @@ class BatchControlResult:
     safety_violation: np.ndarray
     cone_violation: np.ndarray
     yielded: np.ndarray
+    unblocked: np.ndarray
     timings: dict
-    unblocked: np.ndarray | None = None
 
     @property
     def n_robots(self) -> int:
@@ -136,7 +135,7 @@ class BatchControlResult:
             safety_violation=float(self.safety_violation[i]),
             cone_violation=float(self.cone_violation[i]),
             yielded=bool(self.yielded[i]),
-            unblocked=self.unblocked is not None and bool(self.unblocked[i]),
+            unblocked=bool(self.unblocked[i]),
             timings=share,
         )
 
