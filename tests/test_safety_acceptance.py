@@ -35,6 +35,9 @@ _BEFORE_CONE = {
     "hold_band_barrier": False,
     "deadlock_release": 0.2,
 }
+#: the filter's tracker as it was before the fused recovery of collapsed clouds
+#: (``ess_recovery``): the filter's counterfactuals keep their courses on it
+_BEFORE_FUSION = {"ess_recovery": "reseed"}
 
 
 def _scaled(n: int) -> dict:
@@ -193,7 +196,8 @@ def test_filter_wait_charge_regression_collides_with_yield_and_sigma_cut():
         "priority_hysteresis_m": 0.0,
         **_BEFORE_CONE,
     }
-    case = StressCase("wait_charge", 12, 120.0, "random", filter_kwargs={"controller_params": cp})
+    fk = {"controller_params": cp, "tracker_params": _BEFORE_FUSION}
+    case = StressCase("wait_charge", 12, 120.0, "random", filter_kwargs=fk)
     assert run_stress_episode(case, 101, 300)["collisions"] > 0
 
 
@@ -288,9 +292,10 @@ def test_filter_narrow_view_edge_regression(bearings):
             blind_travel_view_deg=10.0, blind_travel_memory_s=30.0, look_yields_fov=False,
             hold_band_barrier=False,
         )  # fmt: skip
-    case = StressCase(
-        "wait_charge", 24, 45.0, "head_on_pair", filter_kwargs={"controller_params": cp}
-    )
+    fk = {"controller_params": cp}
+    if not bearings:  # and the tracker of then (the fused recovery: 2.36 m)
+        fk["tracker_params"] = _BEFORE_FUSION
+    case = StressCase("wait_charge", 24, 45.0, "head_on_pair", filter_kwargs=fk)
     ep = run_stress_episode(case, 300, 260)
     assert ep["collisions"] == 0, ep
     if bearings:
@@ -330,6 +335,8 @@ def test_filter_budget_gives_no_credit_for_backing_away(credit_m):
     from fov_marl.stress import StressCase, run_stress_episode
 
     fk = {"controller_params": {"blind_travel_credit_m": credit_m}}
+    if credit_m > 0.0:  # on the tracker of then (the fused recovery sends it elsewhere)
+        fk["tracker_params"] = _BEFORE_FUSION
     case = StressCase("head_on", 12, 120.0, "head_on_pair", filter_kwargs=fk)
     ep = run_stress_episode(case, 9000, 300)
     assert ep["collisions"] == 0, ep
@@ -353,8 +360,9 @@ def test_filter_holds_d_s_when_a_seen_neighbours_cloud_overshoots(bias_alpha):
     from fov_marl.stress import StressCase, run_stress_episode
 
     fk = {"tracker_params": {"recovery_bias_alpha": bias_alpha}}
-    if bias_alpha == 0.0:
+    if bias_alpha == 0.0:  # and the tracker's re-seed of then (before ``ess_recovery``)
         fk["controller_params"] = {"hold_band_barrier": False}
+        fk["tracker_params"] = {**_BEFORE_FUSION, "recovery_bias_alpha": 0.0}
     case = StressCase("chase_last_seen", 24, 120.0, "random", filter_kwargs=fk)
     ep = run_stress_episode(case, 9100, 180)
     assert ep["collisions"] == 0, ep
@@ -362,6 +370,29 @@ def test_filter_holds_d_s_when_a_seen_neighbours_cloud_overshoots(bias_alpha):
         assert ep["min_distance_m"] >= 2.0 and ep["violation_events"] == 0, ep
     else:
         assert ep["min_distance_m"] < 2.0, ep
+
+
+@pytest.mark.parametrize("ess_recovery", ["fuse", "reseed"])
+def test_filter_survives_one_outlying_detection_of_a_seen_neighbour(ess_recovery):
+    """straight, N = 12, β = 360°, wall start, seed 17000 (the full stress grid's one
+    collision, run on a lent 16-core machine). Robots 1 and 2 stood 1.1 m apart along the
+    wall, each seeing the other. At step 87 robot 2's detection of robot 1 was 1.2 m off
+    (3.8 σ of Σ_MEAS: about 7e-4 per detection, tens of times per episode at N = 12). Its
+    cloud (std 0.1 × 0.25 m) kept a handful of particles, so the effective-size test
+    re-seeded it from N(z, Σ_MEAS) alone; z lay beyond the wall, the clamp put the cloud
+    on robot 2 itself, and the rows, built on it, let robot 2 drive into robot 1 (0.997 m).
+    The filter now fuses such a cloud with the detection (``ess_recovery="fuse"``, tracker
+    step 4): no collision and no pair closer than the 1.1 m start. The counterfactual
+    (``"reseed"``) collides, so the test can fail."""
+    from fov_marl.stress import StressCase, run_stress_episode
+
+    fk = {"tracker_params": {"ess_recovery": ess_recovery}}
+    case = StressCase("straight", 12, 360.0, "wall", filter_kwargs=fk)
+    ep = run_stress_episode(case, 17000, 100)
+    if ess_recovery == "fuse":
+        assert ep["collisions"] == 0 and ep["min_distance_m"] >= 1.1 - 1e-6, ep
+    else:
+        assert ep["collisions"] > 0, ep
 
 
 def test_filter_budget_without_the_glance_stalls_a_well_behaved_policy():
@@ -382,9 +413,8 @@ def test_filter_narrow_view_edge_regression_collides_with_a_1m_budget():
     from fov_marl.stress import StressCase, run_stress_episode
 
     cp = {"blind_travel_m": 1.0, "priority_hysteresis_m": 0.0, **_BEFORE_CONE}  # found on
-    case = StressCase(
-        "wait_charge", 24, 45.0, "head_on_pair", filter_kwargs={"controller_params": cp}
-    )
+    fk = {"controller_params": cp, "tracker_params": _BEFORE_FUSION}
+    case = StressCase("wait_charge", 24, 45.0, "head_on_pair", filter_kwargs=fk)
     assert run_stress_episode(case, 300, 260)["collisions"] > 0
 
 
@@ -589,7 +619,15 @@ def test_crossing_seed_7_stalls_without_lost_fov_yield():
         # every counterfactual runs on the filter the collision was found with: before the
         # FoV lead's hysteresis (priority_hysteresis_m = 0), which sends these episodes on
         # other courses that stay clear even without the rows
-        (1, {"blind_travel_m": 0.0, "priority_hysteresis_m": 0.0, **_BEFORE_CONE}),
+        (
+            1,
+            {
+                "blind_travel_m": 0.0,
+                "priority_hysteresis_m": 0.0,
+                **_BEFORE_CONE,
+                "tracker": _BEFORE_FUSION,
+            },
+        ),
         # lost_fov_yield and lost_sigma_max_m = 2 (both off in the shipped filter) send
         # this episode on another course; keep them off so the course is the one the
         # rows were built for
@@ -605,7 +643,7 @@ def test_crossing_seed_7_stalls_without_lost_fov_yield():
                 # and before the local re-seed of deleted beliefs, which also sends it on
                 # another course (0 collisions without the rows; 1, min 0.09 m, with the
                 # arena-wide re-seed)
-                "tracker": {"recovery_reseed": "arena"},
+                "tracker": {"recovery_reseed": "arena", **_BEFORE_FUSION},
             },
         ),
     ],

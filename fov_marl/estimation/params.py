@@ -47,6 +47,9 @@ field                              default     reason
 ``recovery_min_ess``               10.0        detected neighbour whose weighted set has an
                                                effective size below ``min(this, P_j / 2)``
                                                is re-seeded around the detection
+``ess_recovery``                   ``reseed``  ... from N(z, Sigma_MEAS); ``fuse``: its own
+                                               cloud mapped onto the Gaussian posterior
+                                               of its moments and z (tracker step 4)
 ``recovery_gate_chi2``             27.63       ... as is one whose nearest particle is
                                                farther than this squared Mahalanobis
                                                distance (chi^2 2 dof, p = 1e-6)
@@ -152,11 +155,13 @@ MotionModel = Literal["auto", "mixture", "coverage", "crossing", "static"]
 InitMode = Literal["auto", "known", "uniform"]
 EgoMotion = Literal["action", "pose"]
 RecoveryReseed = Literal["local", "arena"]
+EssRecovery = Literal["reseed", "fuse"]
 
 _MOTION_MODELS = ("auto", "mixture", "coverage", "crossing", "static")
 _INIT_MODES = ("auto", "known", "uniform")
 _EGO_MOTIONS = ("action", "pose")
 _RECOVERY_RESEEDS = ("local", "arena")
+_ESS_RECOVERIES = ("reseed", "fuse")
 
 #: Upper bound of the noise intensities and spreads (m/sqrt(s), rad/sqrt(s), m, rad) and
 #: of the other unbounded reals: particle clouds stay finite in float64 far below it.
@@ -227,6 +232,12 @@ class TrackerParams:
             in [0, 1e6].
         recovery_min_ess: effective-sample-size threshold of the re-seed around a
             detection, in [0, 1e9].
+        ess_recovery: what a detected neighbour whose weighted set fell below that
+            effective size (and passed the χ² gate and the bias test) becomes:
+            ``"reseed"`` (the default) a fresh cloud from N(z, Σ_MEAS); ``"fuse"`` its
+            own cloud moved and shrunk onto the Gaussian posterior of its moments and
+            the detection (tracker step 4; the safety filter's default, its
+            ``FILTER_TRACKER_DEFAULTS`` say why).
         recovery_gate_chi2: squared-Mahalanobis gate of the re-seed, in (0, 1e9].
         recovery_bias_alpha: weight of the newest residual in the bias test's moving
             average (tracker step 4), in [0, 1]; 0 (the default) turns the test off
@@ -274,6 +285,7 @@ class TrackerParams:
     confidence: float = 0.95
     mc_error_factor: float = 15.0
     recovery_min_ess: float = 10.0
+    ess_recovery: EssRecovery = "reseed"
     recovery_gate_chi2: float = -2.0 * math.log(1e-6)
     recovery_bias_alpha: float = 0.0
     recovery_bias_chi2: float = -2.0 * math.log(1e-3)
@@ -314,6 +326,11 @@ class TrackerParams:
             self,
             "recovery_reseed",
             check_choice("recovery_reseed", self.recovery_reseed, _RECOVERY_RESEEDS),
+        )
+        set_(
+            self,
+            "ess_recovery",
+            check_choice("ess_recovery", self.ess_recovery, _ESS_RECOVERIES),
         )
         if self.coverage_standoff_m is not None:
             set_(

@@ -14,6 +14,7 @@ import numpy as np
 
 from fov_marl.config import ScenarioConfig
 from fov_marl.estimation import TrackerParams
+from fov_marl.estimation import kernels as K
 from fov_marl.geometry import (
     body_to_world,
     chi2_2dof,
@@ -270,11 +271,20 @@ def reference_step(
             lw = -0.5 * (maha + dh**2 / var[2])
             w = np.exp(lw - lw.max())
             ess = w.sum() ** 2 / np.sum(w**2)
-            bad = (
-                maha.min() > params.recovery_gate_chi2
-                or ess < min(params.recovery_min_ess, 0.5 * counts[j])
-                or bool(alarm[j])
-            )
+            gated = maha.min() > params.recovery_gate_chi2 or bool(alarm[j])
+            low = ess < min(params.recovery_min_ess, 0.5 * counts[j])
+            bad = gated or low
+            if low and not gated and params.ess_recovery == "fuse":  # step 4, fused
+                bad = False
+                qx, qy = fuse_onto_detection_reference(
+                    p[:, 0], p[:, 1], [counts[j]], [z[0]], [z[1]], (var[0], var[1])
+                )
+                p = np.stack([qx, qy], -1)
+                if params.clamp_to_arena:
+                    pw = np.clip(body_to_world(p, pose_now), r_rob, L - r_rob)
+                    p = world_to_body(pw, pose_now)
+                w = np.ones(counts[j])
+                ess = float(counts[j])
             if bad:
                 nz = rng.standard_normal((3, counts[j]))
                 sd = np.sqrt(var)
@@ -397,3 +407,29 @@ def reference_step(
                 v_cv[j] = np.sum(w[cv, None] * vel[cv], axis=0) / np.sum(w[cv])
         est.update(mode_probs=probs, velocity=vel_est, velocity_cv=v_cv)
     return new_state, est
+
+
+def fuse_onto_detection_reference(
+    x: np.ndarray,
+    y: np.ndarray,
+    block_len: np.ndarray,
+    zx: np.ndarray,
+    zy: np.ndarray,
+    meas_var: tuple[float, float],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Slow reference of :func:`fov_marl.estimation.kernels.fuse_onto_detection`: block by block, the textbook
+    information form of the posterior, ``C' = (C⁻¹ + R⁻¹)⁻¹``, ``μ' = C' (C⁻¹ μ + R⁻¹ z)``."""
+    xo, yo = np.empty_like(x), np.empty_like(y)
+    R_inv = np.diag([1.0 / meas_var[0], 1.0 / meas_var[1]])
+    s = 0
+    for b, nb in enumerate(np.asarray(block_len).tolist()):
+        p = np.stack([x[s : s + nb], y[s : s + nb]], -1)
+        mu = p.mean(axis=0)
+        C = (p - mu).T @ (p - mu) / nb + K._FUSE_COV_FLOOR * np.eye(2)
+        C_post = np.linalg.inv(np.linalg.inv(C) + R_inv)
+        mu_post = C_post @ (np.linalg.solve(C, mu) + R_inv @ np.array([zx[b], zy[b]]))
+        T = np.linalg.cholesky(C_post) @ np.linalg.inv(np.linalg.cholesky(C))
+        q = mu_post + (p - mu) @ T.T
+        xo[s : s + nb], yo[s : s + nb] = q[:, 0], q[:, 1]
+        s += nb
+    return xo, yo

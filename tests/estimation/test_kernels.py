@@ -282,3 +282,61 @@ def test_wrap_range_and_equivalence():
     assert np.all(np.abs(wa) <= math.pi)
     np.testing.assert_allclose(np.cos(wa), np.cos(a), atol=1e-12)
     np.testing.assert_allclose(np.sin(wa), np.sin(a), atol=1e-12)
+
+
+@settings(max_examples=120, deadline=None)
+@given(
+    sizes=st.lists(st.integers(1, 40), min_size=1, max_size=5),
+    seed=st.integers(0, 2**31 - 1),
+    spread=st.floats(1e-3, 20.0),
+    var=st.tuples(st.floats(1e-3, 2.0), st.floats(1e-3, 2.0)),
+)
+def test_fuse_onto_detection_is_the_gaussian_posterior(sizes, seed, spread, var):
+    """Each moved cloud has exactly the posterior's moments of (its own moments + 1e-6 I)
+    and N(z, R), and matches the block-by-block information-form reference."""
+    from .reference import fuse_onto_detection_reference
+
+    rng = np.random.default_rng(seed)
+    n = np.array(sizes)
+    F = int(n.sum())
+    x = rng.normal(3.0, spread, F) * rng.uniform(0.2, 1.0)
+    y = rng.normal(-1.0, spread, F) + 0.5 * x  # correlated clouds
+    zx, zy = rng.normal(0.0, 5.0, n.size), rng.normal(0.0, 5.0, n.size)
+    fx, fy = K.fuse_onto_detection(x, y, n, zx, zy, var)
+    rx, ry = fuse_onto_detection_reference(x, y, n, zx, zy, var)
+    scale = 1.0 + np.abs(np.concatenate([x, y, zx, zy])).max()
+    np.testing.assert_allclose(fx, rx, atol=1e-9 * scale)
+    np.testing.assert_allclose(fy, ry, atol=1e-9 * scale)
+    R_inv = np.diag([1.0 / var[0], 1.0 / var[1]])
+    s = 0
+    for b, nb in enumerate(n.tolist()):
+        p = np.stack([x[s : s + nb], y[s : s + nb]], -1)
+        q = np.stack([fx[s : s + nb], fy[s : s + nb]], -1)
+        mu = p.mean(0)
+        C = (p - mu).T @ (p - mu) / nb + 1e-6 * np.eye(2)
+        C_post = np.linalg.inv(np.linalg.inv(C) + R_inv)
+        mu_post = C_post @ (np.linalg.solve(C, mu) + R_inv @ np.array([zx[b], zy[b]]))
+        np.testing.assert_allclose(q.mean(0), mu_post, atol=1e-8 * scale)
+        # the covariance: the particles' own, mapped by T = L' L^-1 (the 1e-6 floor is
+        # part of C, not of the particles)
+        cq = (q - q.mean(0)).T @ (q - q.mean(0)) / nb
+        cp = (p - mu).T @ (p - mu) / nb
+        T = np.linalg.cholesky(C_post) @ np.linalg.inv(np.linalg.cholesky(C))
+        np.testing.assert_allclose(cq, T @ cp @ T.T, atol=1e-9 * scale**2)
+        np.testing.assert_allclose(T @ C @ T.T, C_post, rtol=1e-7, atol=1e-12 * scale**2)
+        s += nb
+
+
+def test_fuse_onto_detection_narrow_cloud_barely_moves_wide_cloud_jumps():
+    """A cloud narrow against Σ_MEAS keeps most of its place (the traced outlier: 0.1 m
+    std, detection 1.3 m off); a wide one lands on the detection with Σ_MEAS's scale."""
+    rng = np.random.default_rng(0)
+    narrow_x, narrow_y = rng.normal(0.0, 0.1, 300), rng.normal(1.3, 0.25, 300)
+    fx, fy = K.fuse_onto_detection(narrow_x, narrow_y, np.array([300]), np.array([-0.5]),
+                                   np.array([0.0]), (0.1, 0.1))  # fmt: skip
+    assert 0.6 < fy.mean() < 1.0 and fy.std() < 0.25  # between, nearer the prior in x
+    wide_x, wide_y = rng.normal(0.0, 10.0, 300), rng.normal(0.0, 10.0, 300)
+    fx, fy = K.fuse_onto_detection(wide_x, wide_y, np.array([300]), np.array([4.0]),
+                                   np.array([-2.0]), (0.1, 0.1))  # fmt: skip
+    assert abs(fx.mean() - 4.0) < 0.01 and abs(fy.mean() + 2.0) < 0.01
+    assert 0.25 < fx.std() < 0.35 and 0.25 < fy.std() < 0.35

@@ -829,3 +829,31 @@ def test_vectorised_bias_test_equals_slow_reference():
         np.testing.assert_array_equal(s["bias_alarm"], new_state["bias_alarm"])
         fired += int(np.sum(state["bias_alarm"] & est.detected))
     assert fired > 0  # the test ran: some alarms re-seeded a detected neighbour
+
+
+def test_vectorised_fusion_equals_slow_reference():
+    """``ess_recovery="fuse"`` (the safety filter's setting, tracker step 4): the fused
+    clouds, estimates and re-seeds match the reference step by step, and fusions happen."""
+    from fov_marl.wrappers.safety_filter import FILTER_TRACKER_DEFAULTS
+
+    params = TrackerParams(**{**FILTER_TRACKER_DEFAULTS, "n_particles_total": 300})
+    assert params.ess_recovery == "fuse"
+    ep = record_episode(
+        n_agents=4, steps=40, seed=3, scenario="coverage", arena_size_m=12.0,
+        density_mean_m=(6.0, 6.0),
+    )  # fmt: skip
+    tr = NeighborTracker(ep.config, 0, params, np.random.default_rng(2))
+    tr.reset(ep.obs0[0])
+    for a, o in zip(ep.actions, ep.obs, strict=True):
+        state = _state(tr)
+        rng_ref = copy.deepcopy(tr._bank._cores[0]._rngs[0])
+        tr.step(a[0], o[0])
+        new_state, ref = reference_step(ep.config, params, 0, state, a[0], o[0], rng_ref)
+        est = tr.estimate()
+        np.testing.assert_array_equal(est.recovered, ref["recovered"])
+        np.testing.assert_allclose(est.mean_body, ref["mean"], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(est.cov_body, ref["cov"], rtol=1e-8, atol=1e-9)
+        s = _state(tr)
+        np.testing.assert_allclose(s["x"], new_state["x"], atol=1e-9)
+        np.testing.assert_allclose(s["y"], new_state["y"], atol=1e-9)
+    assert tr.n_fusions > 0  # the branch ran
