@@ -475,7 +475,7 @@ def weighted_moments(
     x: np.ndarray,
     y: np.ndarray,
     w: np.ndarray,
-    block_of: np.ndarray,
+    block_of: np.ndarray | None,
     block_start: np.ndarray,
     block_len: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -488,7 +488,8 @@ def weighted_moments(
 
     Args:
         x, y: ``(F,)`` positions; w: ``(F,)`` non-negative weights, positive sum per block.
-        block_of: ``(F,)`` block of each particle; block_start: ``(B,)``.
+        block_of: ``(F,)`` block of each particle (None when ``block_len`` is given);
+            block_start: ``(B,)``.
         block_len: ``(B,)`` block sizes, optional: per-particle copies of the block
             means are then made with ``np.repeat`` (the same numbers as the gather by
             ``block_of``, several times faster).
@@ -581,20 +582,17 @@ def fuse_onto_detection(
     n = np.asarray(block_len, dtype=np.int64)
     starts = np.zeros(n.size, dtype=np.int64)
     np.cumsum(n[:-1], out=starts[1:])
-    mx = np.add.reduceat(x, starts) / n
-    my = np.add.reduceat(y, starts) / n
-    ex = x - np.repeat(mx, n)
-    ey = y - np.repeat(my, n)
-    C = np.empty((n.size, 2, 2))
-    C[:, 0, 0] = np.add.reduceat(ex * ex, starts) / n + _FUSE_COV_FLOOR
-    C[:, 0, 1] = C[:, 1, 0] = np.add.reduceat(ex * ey, starts) / n
-    C[:, 1, 1] = np.add.reduceat(ey * ey, starts) / n + _FUSE_COV_FLOOR
+    _, m, C = weighted_moments(x, y, np.ones(x.shape[0]), None, starts, n)
+    C[:, 0, 0] += _FUSE_COV_FLOOR
+    C[:, 1, 1] += _FUSE_COV_FLOOR
+    ex = x - np.repeat(m[:, 0], n)
+    ey = y - np.repeat(m[:, 1], n)
     S = C.copy()
     S[:, 0, 0] += meas_var[0]
     S[:, 1, 1] += meas_var[1]
     K_gain = C @ np.linalg.inv(S)
-    r = np.stack([zx - mx, zy - my], -1)
-    mu = np.stack([mx, my], -1) + np.einsum("bij,bj->bi", K_gain, r)
+    r = np.stack([zx, zy], -1) - m
+    mu = m + np.einsum("bij,bj->bi", K_gain, r)
     C_post = C - K_gain @ C
     C_post = 0.5 * (C_post + np.swapaxes(C_post, 1, 2))
     T = np.linalg.cholesky(C_post) @ np.linalg.inv(np.linalg.cholesky(C))

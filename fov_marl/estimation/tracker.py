@@ -650,7 +650,7 @@ class _BankCore:
         """Re-seed the detected blocks ``fast`` (ascending) from N(z, Σ_MEAS): per robot one
         draw of ``(3 + 2 mixture) P_j`` normals per block, in block order."""
         rows = fast // self._M
-        n = self._block_len[fast]
+        n, loc, idx = self._block_particles(fast)
         per = 5 if self._mix else 3  # normals per particle: x, y, h (+ 2 velocity)
         draws = []
         for k in np.unique(rows).tolist():
@@ -659,9 +659,7 @@ class _BankCore:
         off = np.zeros(fast.size, dtype=np.int64)  # each block's offset in ``flat``
         np.cumsum(per * n[:-1], out=off[1:])
         nb = np.repeat(n, n)
-        loc = np.arange(nb.size) - np.repeat(np.cumsum(n) - n, n)  # index in the block
         base = np.repeat(off, n) + loc
-        idx = np.repeat(self._starts[fast], n) + loc  # particle indices
         sd = self._meas_std
         k_p = np.repeat(rows, n)
         bx = np.repeat(zx.reshape(-1)[fast], n) + sd[0] * flat[base]
@@ -683,14 +681,19 @@ class _BankCore:
         np.add.at(self.n_recoveries_detection, rows, 1)
         w[idx] = 1.0
 
+    def _block_particles(self, blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(n (k,), loc (Σn,), idx (Σn,))`` of the flat ``blocks``: their sizes, each
+        particle's index within its block, and the particles' flat indices."""
+        n = self._block_len[blocks]
+        loc = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+        return n, loc, np.repeat(self._starts[blocks], n) + loc
+
     def _fuse_detected(self, blocks, x, y, w, zx, zy, pose) -> None:
         """``ess_recovery="fuse"`` (step 4): map the clouds of the detected ``blocks``
         (flat block indices) onto the Gaussian posterior of their moments and the
         detection (:func:`~fov_marl.estimation.kernels.fuse_onto_detection`), clamp them
         to the arena, weights 1. No random draw; headings, modes and velocities kept."""
-        n = self._block_len[blocks]
-        loc = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
-        idx = np.repeat(self._starts[blocks], n) + loc
+        n, _, idx = self._block_particles(blocks)
         bx, by = K.fuse_onto_detection(
             x[idx], y[idx], n, zx.reshape(-1)[blocks], zy.reshape(-1)[blocks], self._meas_var
         )

@@ -805,22 +805,30 @@ def test_tracker_invariants_hold_for_any_geometry(
             assert np.all((pw > r - 1e-5) & (pw < arena - r + 1e-5))  # float32 own pose
 
 
-def test_vectorised_bias_test_equals_slow_reference():
-    """The bias test's state (ē, alarms) and its re-seeds match the reference step by
-    step, with a sensitive test (α 0.5, χ² 2) so that it fires within the episode."""
-    params = TrackerParams(n_particles_total=300, recovery_bias_alpha=0.5, recovery_bias_chi2=2.0)
+def _walk_with_reference(params):
+    """The small coverage episode (N = 4, seed 3, 12 m arena) tracked by robot 0 and, step by
+    step, by the reference from the same state and Generator: yields
+    ``(tracker, state before, new reference state, reference estimate)`` per step."""
     ep = record_episode(
         n_agents=4, steps=40, seed=3, scenario="coverage", arena_size_m=12.0,
         density_mean_m=(6.0, 6.0),
     )  # fmt: skip
     tr = NeighborTracker(ep.config, 0, params, np.random.default_rng(2))
     tr.reset(ep.obs0[0])
-    fired = 0
     for a, o in zip(ep.actions, ep.obs, strict=True):
         state = _state(tr)
         rng_ref = copy.deepcopy(tr._bank._cores[0]._rngs[0])
         tr.step(a[0], o[0])
         new_state, ref = reference_step(ep.config, params, 0, state, a[0], o[0], rng_ref)
+        yield tr, state, new_state, ref
+
+
+def test_vectorised_bias_test_equals_slow_reference():
+    """The bias test's state (ē, alarms) and its re-seeds match the reference step by
+    step, with a sensitive test (α 0.5, χ² 2) so that it fires within the episode."""
+    params = TrackerParams(n_particles_total=300, recovery_bias_alpha=0.5, recovery_bias_chi2=2.0)
+    fired = 0
+    for tr, state, new_state, ref in _walk_with_reference(params):
         est = tr.estimate()
         np.testing.assert_array_equal(est.recovered, ref["recovered"])
         np.testing.assert_allclose(est.mean_body, ref["mean"], rtol=1e-9, atol=1e-9)
@@ -838,17 +846,8 @@ def test_vectorised_fusion_equals_slow_reference():
 
     params = TrackerParams(**{**FILTER_TRACKER_DEFAULTS, "n_particles_total": 300})
     assert params.ess_recovery == "fuse"
-    ep = record_episode(
-        n_agents=4, steps=40, seed=3, scenario="coverage", arena_size_m=12.0,
-        density_mean_m=(6.0, 6.0),
-    )  # fmt: skip
-    tr = NeighborTracker(ep.config, 0, params, np.random.default_rng(2))
-    tr.reset(ep.obs0[0])
-    for a, o in zip(ep.actions, ep.obs, strict=True):
-        state = _state(tr)
-        rng_ref = copy.deepcopy(tr._bank._cores[0]._rngs[0])
-        tr.step(a[0], o[0])
-        new_state, ref = reference_step(ep.config, params, 0, state, a[0], o[0], rng_ref)
+    tr = None
+    for tr, _, new_state, ref in _walk_with_reference(params):
         est = tr.estimate()
         np.testing.assert_array_equal(est.recovered, ref["recovered"])
         np.testing.assert_allclose(est.mean_body, ref["mean"], rtol=1e-9, atol=1e-9)
@@ -856,4 +855,4 @@ def test_vectorised_fusion_equals_slow_reference():
         s = _state(tr)
         np.testing.assert_allclose(s["x"], new_state["x"], atol=1e-9)
         np.testing.assert_allclose(s["y"], new_state["y"], atol=1e-9)
-    assert tr.n_fusions > 0  # the branch ran
+    assert tr is not None and tr.n_fusions > 0  # the branch ran
