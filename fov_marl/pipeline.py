@@ -199,6 +199,7 @@ class PfCbfPipeline:
         )
         self.bank: VectorTrackerBank | None = None
         self._applied: np.ndarray | None = None
+        self._travel_pending = False  # a filter() output not yet booked (Sections 2d-2e)
         self._est: dict[str, np.ndarray] | None = None
         self._own_pose = np.zeros((R, 3))
         self._goal_body = np.zeros((R, 2))
@@ -305,6 +306,7 @@ class PfCbfPipeline:
         init_all = self._poses(initial_poses_world, "initial_poses_world")
         self._read_cues(obs_m)
         self._applied = np.zeros((self.n_rows, 3), dtype=np.float32)
+        self._travel_pending = False
         self._blind_travel_world = np.zeros((self.n_rows, 2))
         self._bearing_travel = np.zeros_like(self._bearing_travel)
         self._fov_lead = np.full(self.n_rows, -1, dtype=np.int64)
@@ -416,6 +418,7 @@ class PfCbfPipeline:
     def observe_arrays(self, obs: Any, poses_world: Any = None) -> None:
         """:meth:`observe` for every copy: ``obs (B, N, D)``, ``poses_world (B, N, 3)``."""
         obs_m = self._obs_rows(obs)
+        self._book_travel()  # the step just taken, from the pose it started at
         self._read_cues(obs_m)
         if self._bearing_travel.shape[1]:  # one budget kept: per bearing (Section 2e) ...
             self._bearing_travel = bearing_travel_reset(
@@ -713,24 +716,59 @@ class PfCbfPipeline:
         self.last_timings["qp"] = time.perf_counter() - t0
         act = velocity_to_action(u[:, :2], u[:, 2], cfg.v_max_mps, cfg.omega_max_radps)
         self._applied = act
-        if self.estimates == "tracker":
-            v = act[:, :2].astype(np.float64) * cfg.v_max_mps
-            if self._bearing_travel.shape[1]:
-                self._bearing_travel = bearing_travel_step(
-                    self._bearing_travel,
-                    v,
-                    self._own_pose[:, 2],
-                    cfg.dt_s,
-                    self.controller_params.blind_travel_memory_s,
-                    floor_m=self.controller_params.blind_travel_credit_m,
-                    omega_radps=act[:, 2].astype(np.float64) * cfg.omega_max_radps,
-                )
-            else:
-                self._blind_travel_world = blind_travel_step(
-                    self._blind_travel_world,
-                    v,
-                    self._own_pose[:, 2],
-                    cfg.dt_s,
-                    self.controller_params.blind_travel_memory_s,
-                )
+        self._travel_pending = True
         return act
+
+    def set_applied(self, actions: Any) -> None:
+        """Replace the actions remembered as applied at the last step.
+
+        :meth:`filter` remembers its own output as what each robot applied; the next
+        :meth:`observe` moves the particles by that motion (tracker step 1) and books it
+        in the blind travel budget (:mod:`fov_marl.control.safety` Sections 2d-2e). When
+        something between this pipeline and the env changed the actions (a
+        :class:`~fov_marl.wrappers.SafetyFilterWrapper` in front of the ``pfcbf`` policy),
+        call this between the env step and :meth:`observe` with what was applied: a
+        robot knows the velocity its own actuators executed.
+
+        Args:
+            actions: ``(B N, 3)`` normalised actions in ``[-1, 1]`` (rows as
+                :meth:`filter` returns them).
+
+        Raises:
+            ValueError: another shape, non-finite entries or entries outside ``[-1, 1]``.
+        """
+        a = np.asarray(actions, dtype=np.float64)
+        if a.shape != (self.n_rows, 3):
+            raise ValueError(f"actions must have shape ({self.n_rows}, 3), got {a.shape}")
+        if not np.isfinite(a).all() or np.abs(a).max(initial=0.0) > 1.0:
+            raise ValueError("actions must be finite and in [-1, 1]")
+        self._applied = a.astype(np.float32)
+
+    def _book_travel(self) -> None:
+        """Book the last step's applied translation in the blind travel budget (Sections
+        2d-2e), in the frame of the pose it started from (called by :meth:`observe_arrays`
+        before the new cues are read)."""
+        if self.estimates != "tracker" or not self._travel_pending:
+            return
+        self._travel_pending = False
+        cfg = self.config
+        act = self._applied
+        v = act[:, :2].astype(np.float64) * cfg.v_max_mps
+        if self._bearing_travel.shape[1]:
+            self._bearing_travel = bearing_travel_step(
+                self._bearing_travel,
+                v,
+                self._own_pose[:, 2],
+                cfg.dt_s,
+                self.controller_params.blind_travel_memory_s,
+                floor_m=self.controller_params.blind_travel_credit_m,
+                omega_radps=act[:, 2].astype(np.float64) * cfg.omega_max_radps,
+            )
+        else:
+            self._blind_travel_world = blind_travel_step(
+                self._blind_travel_world,
+                v,
+                self._own_pose[:, 2],
+                cfg.dt_s,
+                self.controller_params.blind_travel_memory_s,
+            )

@@ -91,6 +91,10 @@ class PipelinePolicy:
         controller: ``"auto"``, ``"batched"`` or ``"loop"`` (see :class:`PfCbfPipeline`;
             one team: ``"auto"`` is the per-robot loop, measured as fast as the batched
             controller at N = 6-24 and bit-identical to the numbers of before).
+        adopt_applied: behind a :class:`~fov_marl.wrappers.SafetyFilterWrapper`, move the
+            particles and book the blind travel by the actions the filter applied, not
+            by the policy's own (:meth:`_adopt_applied`); False (an ablation) keeps the
+            policy's own, as before this option. No effect without a filter.
     """
 
     def __init__(
@@ -103,8 +107,10 @@ class PipelinePolicy:
         tracker_params: TrackerParams | dict | None = None,
         controller_params: ControllerParams | dict | None = None,
         controller: str = "auto",
+        adopt_applied: bool = True,
     ) -> None:
         self.env = env
+        self.adopt_applied = bool(adopt_applied)
         self.base = env.unwrapped
         cfg = self.base.config
         if isinstance(tracker_params, dict):
@@ -128,6 +134,8 @@ class PipelinePolicy:
         self.agents = list(self.base.possible_agents)
         self._seed: int | None = None
         self._started = False
+        self._sent: np.ndarray | None = None  # (N, 3) the last filter() output
+        self._sent_rows: np.ndarray | None = None  # (N,) its rows returned as actions
 
     @property
     def last_timings(self) -> dict[str, float]:
@@ -137,6 +145,7 @@ class PipelinePolicy:
     def reset(self, seed: int | None = None) -> None:
         self._seed = seed
         self._started = False
+        self._sent = self._sent_rows = None
 
     def act(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         pl = self.pipeline
@@ -145,9 +154,33 @@ class PipelinePolicy:
             pl.reset(obs, seed=self._seed, initial_poses_world=self.base.poses)
             self._started = True
         else:
+            self._adopt_applied()
             pl.observe(obs, poses_world=self.base.poses if oracle else None)
         act = pl.filter(pl.desired_inputs())
-        return {a: act[i] for i, a in enumerate(self.agents) if a in obs}
+        out = {a: act[i] for i, a in enumerate(self.agents) if a in obs}
+        self._sent = np.array(act, dtype=np.float32)
+        self._sent_rows = np.array([a in obs for a in self.agents])
+        return out
+
+    def _adopt_applied(self) -> None:
+        """Behind a :class:`~fov_marl.wrappers.SafetyFilterWrapper` (``env`` is or wraps
+        one), take the actions it applied at the last step as this pipeline's own applied
+        actions (:meth:`~fov_marl.pipeline.PfCbfPipeline.set_applied`): each robot's
+        particle filters then move by its real motion, and its blind travel budget books
+        the travel it made, not the travel it asked for. Only when the filter's nominal
+        actions are exactly those this policy returned (the filter was fed by it)."""
+        last = getattr(self.env, "last_actions", None) if self.adopt_applied else None
+        if last is None or self._sent is None or self._sent_rows is None:
+            return
+        rows = self._sent_rows
+        nominal = np.asarray(last.nominal, dtype=np.float32)
+        if nominal.shape != self._sent.shape or not np.array_equal(
+            nominal[rows], np.clip(self._sent[rows], -1.0, 1.0)
+        ):
+            return
+        applied = self._sent.copy()
+        applied[rows] = np.asarray(last.applied, dtype=np.float32)[rows]
+        self.pipeline.set_applied(applied)
 
     def draw(self, canvas: Any) -> None:
         """Render layer: robot 0's particles and ellipses (``env.add_render_layer``)."""
