@@ -38,9 +38,6 @@ _BEFORE_CONE = {
 #: the filter's tracker as it was before the fused recovery of collapsed clouds
 #: (``ess_recovery``): the filter's counterfactuals keep their courses on it
 _BEFORE_FUSION = {"ess_recovery": "reseed"}
-#: pfcbf as a policy before it read the filter's applied actions (``adopt_applied``) and
-#: while it kept right in coverage (``deadlock_turn_deg``)
-_PFCBF_BEFORE_ADOPTION = {"adopt_applied": False, "controller_params": {"deadlock_turn_deg": 60.0}}
 
 
 def _scaled(n: int) -> dict:
@@ -109,12 +106,7 @@ def test_settled_pfcbf_team_does_not_chatter():
     the flips from 66 / 66 / 139 (vx / vy / ω) to 13 / 9 / 59."""
     from fov_marl.metrics import action_chatter
 
-    latch = {
-        "lost_fov_yield_latch": False,
-        "hold_band_barrier": False,
-        "deadlock_turn_deg": 60.0,
-        "deadlock_release": 0.2,
-    }
+    latch = {"lost_fov_yield_latch": False, "hold_band_barrier": False, "deadlock_release": 0.2}
     kept = action_chatter(_pfcbf_actions(1, 600, **latch)[200:])
     swapped = action_chatter(_pfcbf_actions(1, 600, priority_hysteresis_m=0.0, **latch)[200:])
     assert kept.sum() <= 1, kept
@@ -133,12 +125,7 @@ def test_lost_fov_yield_latch_stops_a_pinned_robot_turning_back_and_forth():
     either way)."""
     from fov_marl.metrics import action_chatter
 
-    leak = {
-        "blind_travel_memory_s": 30.0,
-        "hold_band_barrier": False,
-        "deadlock_turn_deg": 60.0,
-        "deadlock_release": 0.2,
-    }
+    leak = {"blind_travel_memory_s": 30.0, "hold_band_barrier": False, "deadlock_release": 0.2}
     latched = action_chatter(_pfcbf_actions(3, 945, **leak)[925:])
     unlatched = action_chatter(_pfcbf_actions(3, 945, lost_fov_yield_latch=False, **leak)[925:])
     assert latched.sum() == 0, latched
@@ -153,9 +140,8 @@ def test_keep_right_hysteresis_stops_a_robot_flipping_vx():
     (``deadlock_release`` 0.5) no flip in vx over the last 250 steps; without it, 7."""
     from fov_marl.metrics import action_chatter
 
-    on = {"deadlock_turn_deg": 60.0}  # keep-right as it was in coverage then
-    kept = action_chatter(_pfcbf_actions(5, 1000, **on)[750:])
-    flips = action_chatter(_pfcbf_actions(5, 1000, deadlock_release=0.2, **on)[750:])
+    kept = action_chatter(_pfcbf_actions(5, 1000)[750:])
+    flips = action_chatter(_pfcbf_actions(5, 1000, deadlock_release=0.2)[750:])
     assert kept[0] == 0, kept
     assert flips[0] >= 4, flips  # the counterfactual flips
 
@@ -416,12 +402,12 @@ def test_filter_budget_without_the_glance_stalls_a_well_behaved_policy():
     above the glance (and the 30 s leak, as released before) stalls pfcbf (seed 10: η
     0.538 after 30 s against 0.996 alone; 0.499 when found), so that test can fail. It
     runs pfcbf as it was then, blind to the filter's changes to its actions
-    (``adopt_applied=False``; knowing them: 0.599) and keeping right in coverage."""
+    (``adopt_applied=False``; knowing them: 0.599)."""
     alone = run_episode("coverage", "pfcbf", 10, n_agents=6, max_steps=150)
     fk = {"controller_params": {"look_yields_fov": False, "blind_travel_memory_s": 30.0}}
     filt = run_episode(
         "coverage", "pfcbf", 10, n_agents=6, max_steps=150, safety_filter=True,
-        safety_filter_kwargs=fk, policy_kwargs=_PFCBF_BEFORE_ADOPTION,
+        safety_filter_kwargs=fk, policy_kwargs={"adopt_applied": False},
     )  # fmt: skip
     assert filt.final_eta < 0.6 * alone.final_eta, (filt.final_eta, alone.final_eta)
 
@@ -556,11 +542,11 @@ def test_pfcbf_budget_leak_blocks_a_slow_blind_creep(memory_s, collides):
     30 s leak a robot crept blind at 0.03 m/s (0.9 m of a 1 m budget in steady state) into
     a neighbour whose belief it held 24 m off (min 0.60 m); pfcbf's 120 s leak blocks a
     creep above 0.0083 m/s (min 2.32 m). The counterfactual runs on the neighbour rows
-    and keep-right it was found with (``hold_band_barrier`` off, keep-right on in
-    coverage with ``deadlock_release`` 0.2)."""
+    and keep-right it was found with (``hold_band_barrier`` off, ``deadlock_release``
+    0.2)."""
     cp = {"blind_travel_memory_s": memory_s}
     if collides:
-        cp.update(hold_band_barrier=False, deadlock_turn_deg=60.0, deadlock_release=0.2)
+        cp.update(hold_band_barrier=False, deadlock_release=0.2)
     rec = _coverage(
         48, 4,
         policy_kwargs={

@@ -76,24 +76,7 @@ __all__ = ["PipelinePolicy", "PFCBF_COVERAGE_DEFAULTS"]
 #: leak 2.42 m, but no leak cost coverage at N = 6 (seed 0: final η 0.9886 against 0.9945)
 #: while 120 s keeps it (seeds 0-3: 0.9943 / 0.9959 / 0.9942 / 0.9948 against 0.9945 /
 #: 0.9959 / 0.9938 with 30 s).
-#: No "keep right" (``deadlock_turn_deg = 0``; :meth:`~fov_marl.control.controller.
-#: FovCbfController._unblock`): it resolves the symmetric crossing deadlock (VII-D), but in
-#: coverage the rows that stall a robot are mostly those of neighbours it does not see
-#: (their half-planes and particles), and keep-right then turned u* by 60° and sent the
-#: robot round them at up to 0.9 m/s. Traced (behind the safety filter, N = 6, β = 120°,
-#: seed 5, robot 4, steps 330-680): u* towards the density peak, every direction towards
-#: it blocked by lost neighbours' rows, keep-right drove it 20 m away to the wall, where
-#: limited-range Lloyd (R_s = 6 m) finds no mass to bring it back (final η 0.9816).
-#: Measured, seeds 0-19, 1000 steps, with / without keep-right: pfcbf alone final η
-#: 0.9955 / 0.9956, time to the normalised threshold 7.21 / 6.98 s, largest speed over
-#: the last 50 s 0.021 / 0.007 m/s, min distance 2.551 / 2.469 m; behind the filter
-#: 0.9937 (min 0.9816) / 0.9957 (min 0.9944), 13.0 / 13.5 s, robot-steps changed 53% /
-#: 41%, 0 collisions either way.
-PFCBF_COVERAGE_DEFAULTS: dict[str, Any] = {
-    "blind_travel_m": 1.0,
-    "blind_travel_memory_s": 120.0,
-    "deadlock_turn_deg": 0.0,
-}
+PFCBF_COVERAGE_DEFAULTS: dict[str, Any] = {"blind_travel_m": 1.0, "blind_travel_memory_s": 120.0}
 
 
 class PipelinePolicy:

@@ -137,8 +137,7 @@ field                        default   source / reason
                                        (:meth:`~fov_marl.control.controller.
                                        FovCbfController._unblock`): four crossing robots
                                        otherwise stop for good at the centre (VII-D,
-                                       seed 0); 0 disables (the safety filter's default,
-                                       and pfcbf's in coverage)
+                                       seed 0); 0 disables (the safety filter's default)
 ``deadlock_release``         0.5       hysteresis of "keep right": a robot that kept
                                        right keeps right until its solution keeps this
                                        share of u*'s progress (entered below 0.2);
