@@ -330,7 +330,8 @@ class SafetyFilterWrapper(BaseParallelWrapper):
     @property
     def last_actions(self) -> FilteredActions | None:
         """The last step's ``(nominal, applied)`` actions, each ``(N, 3)`` float32 by robot
-        index (rows of finished agents zero), or None before the first step of an episode.
+        index (a finished agent's nominal row is zero), or None before the first step of an
+        episode.
 
         A stateful policy that models its own motion (the ``pfcbf`` policy's particle
         filters and blind travel budget) reads what its robots really did here; each robot
