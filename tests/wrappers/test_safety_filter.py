@@ -42,6 +42,26 @@ def test_safety_info_reports_nominal_applied_and_status():
     assert env.last_cpu_s > 0
 
 
+def test_last_actions_are_the_steps_nominal_and_applied_actions():
+    env = SafetyFilterWrapper(fov_coverage_v0.parallel_env(n_agents=3))
+    env.reset(seed=0)
+    assert env.last_actions is None
+    acts = {a: np.array([1.5, 0.0, -0.2], dtype=np.float32) for a in env.agents}
+    _, _, _, _, infos = env.step(acts)
+    last = env.last_actions
+    assert last.nominal.shape == last.applied.shape == (3, 3)
+    assert last.nominal.dtype == last.applied.dtype == np.float32
+    for a, info in infos.items():
+        i = env.unwrapped.agent_name_mapping[a]
+        s = safety_of(info)
+        np.testing.assert_array_equal(last.nominal[i], np.float32([1.0, 0.0, -0.2]))  # clipped
+        np.testing.assert_array_equal(last.applied[i], s["applied_action"])
+    last.applied[:] = 9.0  # a copy: the wrapper's own record is untouched
+    assert np.abs(env.last_actions.applied).max() <= 1.0
+    env.reset(seed=1)
+    assert env.last_actions is None
+
+
 def test_wrapper_validates_actions_like_the_env():
     env = SafetyFilterWrapper(fov_coverage_v0.parallel_env(n_agents=3))
     env.reset(seed=0)
