@@ -157,10 +157,9 @@ class PipelinePolicy:
             self._adopt_applied()
             pl.observe(obs, poses_world=self.base.poses if oracle else None)
         act = pl.filter(pl.desired_inputs())
-        out = {a: act[i] for i, a in enumerate(self.agents) if a in obs}
         self._sent = np.array(act, dtype=np.float32)
         self._sent_rows = np.array([a in obs for a in self.agents])
-        return out
+        return {a: act[i] for i, a in enumerate(self.agents) if self._sent_rows[i]}
 
     def _adopt_applied(self) -> None:
         """Behind a :class:`~fov_marl.wrappers.SafetyFilterWrapper` (``env`` is or wraps
