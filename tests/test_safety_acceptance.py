@@ -38,6 +38,14 @@ _BEFORE_CONE = {
 #: the filter's tracker as it was before the fused recovery of collapsed clouds
 #: (``ess_recovery``): the filter's counterfactuals keep their courses on it
 _BEFORE_FUSION = {"ess_recovery": "reseed"}
+#: pfcbf's coverage settings before its budget went per bearing with the glance and
+#: keep-right went off (``PFCBF_COVERAGE_DEFAULTS``): the pfcbf mechanism tests below were
+#: found on them, and the new settings send their seeds on other courses
+_PFCBF_BEFORE_BEARINGS = {
+    "blind_travel_bearings": 0,
+    "look_yields_fov": False,
+    "deadlock_turn_deg": 60.0,
+}
 
 
 def _scaled(n: int) -> dict:
@@ -103,10 +111,16 @@ def test_settled_pfcbf_team_does_not_chatter():
     rows it was measured with (``hold_band_barrier`` off) and without keep-right's
     hysteresis (``deadlock_release`` 0.2): the shipped rows send seed 1 on another
     course with 2 flips here, while over seeds 0-9, steps 200-1000, they cut
-    the flips from 66 / 66 / 139 (vx / vy / ω) to 13 / 9 / 59."""
+    the flips from 66 / 66 / 139 (vx / vy / ω) to 13 / 9 / 59. Both runs on pfcbf's
+    single-vector budget with keep-right (``_PFCBF_BEFORE_BEARINGS``), as found."""
     from fov_marl.metrics import action_chatter
 
-    latch = {"lost_fov_yield_latch": False, "hold_band_barrier": False, "deadlock_release": 0.2}
+    latch = {
+        "lost_fov_yield_latch": False,
+        "hold_band_barrier": False,
+        "deadlock_release": 0.2,
+        **_PFCBF_BEFORE_BEARINGS,
+    }
     kept = action_chatter(_pfcbf_actions(1, 600, **latch)[200:])
     swapped = action_chatter(_pfcbf_actions(1, 600, priority_hysteresis_m=0.0, **latch)[200:])
     assert kept.sum() <= 1, kept
@@ -122,10 +136,16 @@ def test_lost_fov_yield_latch_stops_a_pinned_robot_turning_back_and_forth():
     the budget leak the episode was found with (30 s; pfcbf's 120 s sends it elsewhere)
     and on the neighbour rows and keep-right of then (``hold_band_barrier`` off,
     ``deadlock_release`` 0.2: the shipped ones send it elsewhere too, with no flips
-    either way)."""
+    either way). And on pfcbf's single-vector budget with keep-right
+    (``_PFCBF_BEFORE_BEARINGS``)."""
     from fov_marl.metrics import action_chatter
 
-    leak = {"blind_travel_memory_s": 30.0, "hold_band_barrier": False, "deadlock_release": 0.2}
+    leak = {
+        "blind_travel_memory_s": 30.0,
+        "hold_band_barrier": False,
+        "deadlock_release": 0.2,
+        **_PFCBF_BEFORE_BEARINGS,
+    }
     latched = action_chatter(_pfcbf_actions(3, 945, **leak)[925:])
     unlatched = action_chatter(_pfcbf_actions(3, 945, lost_fov_yield_latch=False, **leak)[925:])
     assert latched.sum() == 0, latched
@@ -137,11 +157,15 @@ def test_keep_right_hysteresis_stops_a_robot_flipping_vx():
     rows binding, the solution kept about a fifth of u*'s progress, so "keep right"
     (``deadlock_turn_deg``) was adopted on alternate steps and vx flipped between +0.1
     and −0.07 m/s (the slow chatter test's 7 vx flips). With the hysteresis
-    (``deadlock_release`` 0.5) no flip in vx over the last 250 steps; without it, 7."""
+    (``deadlock_release`` 0.5) no flip in vx over the last 250 steps; without it, 7.
+    Keep-right is off in coverage now (``PFCBF_COVERAGE_DEFAULTS``); the test runs pfcbf
+    as it was found (``_PFCBF_BEFORE_BEARINGS``), for the mechanism the crossing uses."""
     from fov_marl.metrics import action_chatter
 
-    kept = action_chatter(_pfcbf_actions(5, 1000)[750:])
-    flips = action_chatter(_pfcbf_actions(5, 1000, deadlock_release=0.2)[750:])
+    kept = action_chatter(_pfcbf_actions(5, 1000, **_PFCBF_BEFORE_BEARINGS)[750:])
+    flips = action_chatter(
+        _pfcbf_actions(5, 1000, deadlock_release=0.2, **_PFCBF_BEFORE_BEARINGS)[750:]
+    )
     assert kept[0] == 0, kept
     assert flips[0] >= 4, flips  # the counterfactual flips
 
@@ -402,12 +426,14 @@ def test_filter_budget_without_the_glance_stalls_a_well_behaved_policy():
     above the glance (and the 30 s leak, as released before) stalls pfcbf (seed 10: η
     0.538 after 30 s against 0.996 alone; 0.499 when found), so that test can fail. It
     runs pfcbf as it was then, blind to the filter's changes to its actions
-    (``adopt_applied=False``; knowing them: 0.599)."""
-    alone = run_episode("coverage", "pfcbf", 10, n_agents=6, max_steps=150)
+    (``adopt_applied=False``; knowing them: 0.599) and with its own settings of then
+    (``_PFCBF_BEFORE_BEARINGS``: with its own glance pfcbf turns to look itself)."""
+    pk = {"adopt_applied": False, "controller_params": _PFCBF_BEFORE_BEARINGS}
+    alone = run_episode("coverage", "pfcbf", 10, n_agents=6, max_steps=150, policy_kwargs=pk)
     fk = {"controller_params": {"look_yields_fov": False, "blind_travel_memory_s": 30.0}}
     filt = run_episode(
         "coverage", "pfcbf", 10, n_agents=6, max_steps=150, safety_filter=True,
-        safety_filter_kwargs=fk, policy_kwargs={"adopt_applied": False},
+        safety_filter_kwargs=fk, policy_kwargs=pk,
     )  # fmt: skip
     assert filt.final_eta < 0.6 * alone.final_eta, (filt.final_eta, alone.final_eta)
 
@@ -543,10 +569,10 @@ def test_pfcbf_budget_leak_blocks_a_slow_blind_creep(memory_s, collides):
     a neighbour whose belief it held 24 m off (min 0.60 m); pfcbf's 120 s leak blocks a
     creep above 0.0083 m/s (min 2.32 m). The counterfactual runs on the neighbour rows
     and keep-right it was found with (``hold_band_barrier`` off, ``deadlock_release``
-    0.2)."""
+    0.2) and on pfcbf's single-vector budget (``_PFCBF_BEFORE_BEARINGS``)."""
     cp = {"blind_travel_memory_s": memory_s}
     if collides:
-        cp.update(hold_band_barrier=False, deadlock_release=0.2)
+        cp.update(hold_band_barrier=False, deadlock_release=0.2, **_PFCBF_BEFORE_BEARINGS)
     rec = _coverage(
         48, 4,
         policy_kwargs={

@@ -76,7 +76,33 @@ __all__ = ["PipelinePolicy", "PFCBF_COVERAGE_DEFAULTS"]
 #: leak 2.42 m, but no leak cost coverage at N = 6 (seed 0: final η 0.9886 against 0.9945)
 #: while 120 s keeps it (seeds 0-3: 0.9943 / 0.9959 / 0.9942 / 0.9948 against 0.9945 /
 #: 0.9959 / 0.9938 with 30 s).
-PFCBF_COVERAGE_DEFAULTS: dict[str, Any] = {"blind_travel_m": 1.0, "blind_travel_memory_s": 120.0}
+#:
+#: The budget is kept per bearing (``blind_travel_bearings = 24``, safety Section 2e) and
+#: the look before the leap outranks the FoV levels for its step (``look_yields_fov``),
+#: as in the safety filter; "keep right" (``deadlock_turn_deg``) is off. The single
+#: vector this policy had before forgot the travel of a robot sliding at 0.6 m/s 49° off
+#: its heading (inside the view less its 10° margin) while a neighbour it never saw lay
+#: 33-56° beside that direction: with keep-right off, N = 200 (L = 230.9 m) seed 0 had
+#: two such robots close from 2.86 m to 0.994 m in 37 steps. Keep-right, meant for the
+#: crossing deadlock of VII-D, stranded coverage robots: blocked by the rows of
+#: neighbours they did not see, it turned u* by 60° and drove them round them, 20 m to
+#: the wall (behind the safety filter, seeds 5 and 6: final η 0.9816 / 0.9831). Measured
+#: (N = 6, β = 120°, seeds 0-19, 1000 steps; before / after): alone, final η 0.9955 /
+#: 0.9957, time to the normalised threshold 7.21 / 7.55 s (median 6.6 / 7.0), largest
+#: team speed over the last 50 s 0.021 / 0.005 m/s, 0 collisions (min 2.551 / 2.629 m);
+#: behind the safety filter 0.9937 (min 0.9816) / 0.9957 (min 0.9944), 13.0 / 13.5 s,
+#: robot-steps changed 53% / 41%, largest speed over the last 50 s 0.062 / 0.007 m/s.
+#: N = 200 in the scaled arena, seeds 0-2: min distance 2.641 m, no D_s event (before:
+#: 2.36 m). Per bearing without the glance, by contrast, stopped robots that drive
+#: straight (N = 6: seeds 6 and 9 never settled), since the FoV levels forbade the
+#: sideways look that releases a bearing.
+PFCBF_COVERAGE_DEFAULTS: dict[str, Any] = {
+    "blind_travel_m": 1.0,
+    "blind_travel_memory_s": 120.0,
+    "blind_travel_bearings": 24,
+    "look_yields_fov": True,
+    "deadlock_turn_deg": 0.0,
+}
 
 
 class PipelinePolicy:

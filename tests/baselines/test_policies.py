@@ -111,8 +111,9 @@ def test_policy_draws_particles_and_ellipses_into_the_frame():
 
 def test_pfcbf_uses_the_blind_travel_budget_in_coverage_only():
     """PFCBF_COVERAGE_DEFAULTS: the budget is on for pfcbf in coverage (dense teams slid
-    blind into neighbours never seen), off in crossing and for lloyd-pf (no CBF); a dict
-    override wins, a ControllerParams is used as given."""
+    blind into neighbours never seen), per bearing with the glance and without keep-right;
+    off in crossing (keep-right on there, for VII-D's deadlock) and for lloyd-pf (no CBF);
+    a dict override wins, a ControllerParams is used as given."""
     from fov_marl.baselines import make_policy
     from fov_marl.control import ControllerParams
     from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
@@ -126,6 +127,12 @@ def test_pfcbf_uses_the_blind_travel_budget_in_coverage_only():
     assert budget(make_policy("pfcbf", cov)) == 1.0
     # with a 120 s leak (not ControllerParams' 30 s): a slow blind creep fills it
     assert make_policy("pfcbf", cov).pipeline.controller_params.blind_travel_memory_s == 120.0
+    # per bearing with the glance, keep-right off (coverage only; crossing keeps both)
+    cp_cov = make_policy("pfcbf", cov).pipeline.controller_params
+    cp_cross = make_policy("pfcbf", cross).pipeline.controller_params
+    assert (cp_cov.blind_travel_bearings, cp_cov.look_yields_fov) == (24, True)
+    assert cp_cov.deadlock_turn_deg == 0.0 and cp_cross.deadlock_turn_deg == 60.0
+    assert (cp_cross.blind_travel_bearings, cp_cross.look_yields_fov) == (0, False)
     assert budget(make_policy("pfcbf", cross)) == 0.0
     assert budget(make_policy("lloyd-pf", cov)) == 0.0
     assert budget(make_policy("pfcbf", cov, controller_params={"blind_travel_m": 0.5})) == 0.5
