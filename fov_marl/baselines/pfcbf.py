@@ -15,27 +15,28 @@ starting position of each one of its neighbors"): the policy reads ``env.poses``
 on the first :meth:`act` after :meth:`reset`; pass ``init="uniform"`` to drop it.
 Deterministic under ``reset(seed)``.
 
-Safety of ``pfcbf`` as measured on commit be3bc83 (40 m arena, β = 120°, 1000 steps;
-``tests/test_safety_acceptance.py``, slow; crossing: 4 robots, 20 seeds):
+Safety of ``pfcbf`` as measured on commit 336ce19 (budget per bearing with the glance,
+no keep-right in coverage: :data:`PFCBF_COVERAGE_DEFAULTS`; 40 m arena, β = 120°, 1000
+steps; ``tests/test_safety_acceptance.py``, slow; crossing, unchanged, on be3bc83: 4
+robots, 20 seeds):
 
 =========================  ==========  ==============  ==================  ===========
 team                       seeds       collision ev.   D_s violations      min dist.
 =========================  ==========  ==============  ==================  ===========
-N = 6                      0-19        0               0                   2.48 m
-N = 12                     0-19        0               0                   2.14 m
-N = 24                     0-19        0               0                   2.09 m
-N = 48                     0-4         0               0                   2.11 m
-N = 100, L = 40·√(N/6)     0-2         0               1 episode           1.74 m
-N = 200, L = 40·√(N/6)     0-2         0               0                   2.36 m
+N = 6                      0-19        0               0                   2.63 m
+N = 12                     0-19        0               0                   2.39 m
+N = 24                     0-19        0               0                   2.06 m
+N = 48                     0-4         0               0                   2.22 m
+N = 100, L = 40·√(N/6)     0-2         0               0                   2.60 m
+N = 200, L = 40·√(N/6)     0-2         0               0                   2.64 m
 crossing, 4 robots         0-19        0 (all arrive)  0                   2.43 m
 =========================  ==========  ==============  ==================  ===========
 
-N = 6: team speed over the last 50 s at most 0.006 m/s, final η 0.9944-0.9967. The one
-D_s violation (N = 100, seed 0, steps 501-522, min 1.74 m) is a robot sliding sideways,
-outside its camera sector, 0.21 m in 21 steps towards a neighbour it did not see and
-that saw it but stood still: blind motion within the 1 m blind travel budget
-(:data:`PFCBF_COVERAGE_DEFAULTS`), which bounds such drift to stay clear of contact
-(2 r = 1 m), not of D_s.
+N = 6: team speed over the last 50 s at most 0.005 m/s, final η 0.9945-0.9967. On the
+single-vector budget of be3bc83 N = 100 seed 0 had one D_s violation (steps 501-522,
+min 1.74 m): a robot sliding sideways, outside its camera sector, 0.21 m in 21 steps
+towards a neighbour it did not see and that saw it but stood still, within the 1 m
+budget, which bounds such drift to stay clear of contact (2 r = 1 m), not of D_s.
 Before the local re-seed of a deleted belief (:class:`fov_marl.estimation.TrackerParams`
 ``recovery_reseed``; commit a664dd3) N = 24 seed 12 collided (min 0.54 m): a robot that
 turns fast lets its belief of a neighbour it has just seen lag the turn, the particles
