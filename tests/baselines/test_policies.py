@@ -124,16 +124,16 @@ def test_pfcbf_uses_the_blind_travel_budget_in_coverage_only():
     def budget(pol):
         return pol.pipeline.controller_params.blind_travel_m
 
-    assert budget(make_policy("pfcbf", cov)) == 1.0
-    # with a 120 s leak (not ControllerParams' 30 s): a slow blind creep fills it
-    assert make_policy("pfcbf", cov).pipeline.controller_params.blind_travel_memory_s == 120.0
-    # per bearing with the glance, keep-right off (coverage only; crossing keeps both)
     cp_cov = make_policy("pfcbf", cov).pipeline.controller_params
     cp_cross = make_policy("pfcbf", cross).pipeline.controller_params
+    assert cp_cov.blind_travel_m == 1.0
+    # with a 120 s leak (not ControllerParams' 30 s): a slow blind creep fills it
+    assert cp_cov.blind_travel_memory_s == 120.0
+    # per bearing with the glance, keep-right off (coverage only; crossing keeps both)
     assert (cp_cov.blind_travel_bearings, cp_cov.look_yields_fov) == (24, True)
     assert cp_cov.deadlock_turn_deg == 0.0 and cp_cross.deadlock_turn_deg == 60.0
     assert (cp_cross.blind_travel_bearings, cp_cross.look_yields_fov) == (0, False)
-    assert budget(make_policy("pfcbf", cross)) == 0.0
+    assert cp_cross.blind_travel_m == 0.0
     assert budget(make_policy("lloyd-pf", cov)) == 0.0
     assert budget(make_policy("pfcbf", cov, controller_params={"blind_travel_m": 0.5})) == 0.5
     assert budget(make_policy("pfcbf", cov, controller_params=ControllerParams())) == 0.0
