@@ -20,7 +20,12 @@ from fov_marl.infos import safety_of
 #: the counterfactuals below run on the
 #: filter their episodes were found with (these changes send the episodes on other courses
 #: that stay clear even without the rows they test)
+#: the arc guard before it could stop a creep to keep the turn (``arc_guard_stop``): every
+#: counterfactual below was found with the guard slowing the turn, and the stop sends its
+#: episode on another course (as it does the pfcbf mechanism tests)
+_BEFORE_STOP = {"arc_guard_stop": False}
 _BEFORE_CONE = {
+    **_BEFORE_STOP,
     "bearing_cone_max_deg": 0.0,
     "fallback_tie_mps": 0.0,
     "fallback_straight": False,
@@ -42,6 +47,7 @@ _BEFORE_FUSION = {"ess_recovery": "reseed"}
 #: keep-right went off (``PFCBF_COVERAGE_DEFAULTS``): the pfcbf mechanism tests below were
 #: found on them, and the new settings send their seeds on other courses
 _PFCBF_BEFORE_BEARINGS = {
+    **_BEFORE_STOP,
     "blind_travel_bearings": 0,
     "look_yields_fov": False,
     "deadlock_turn_deg": 60.0,
@@ -286,7 +292,7 @@ def test_filter_packed_wall_start_no_creep_within_the_tolerance(cleanup):
         # found on the single-vector travel budget (10° margin, 30 s leak, no glance); the
         # per-bearing one (safety Section 2e) happens to stop this creep as well
         cp = {"hold_cleanup": False, "blind_travel_bearings": 0, "blind_travel_view_deg": 10.0}
-        cp.update(blind_travel_memory_s=30.0, look_yields_fov=False)
+        cp.update(blind_travel_memory_s=30.0, look_yields_fov=False, **_BEFORE_STOP)
         fk = {"controller_params": cp}
     case = StressCase("wait_charge", 4, 120.0, "wall", filter_kwargs=fk)
     ep = run_stress_episode(case, 1101, 300)
@@ -315,7 +321,7 @@ def test_filter_narrow_view_edge_regression(bearings):
         # the neighbour rows of then (the shipped ones send it elsewhere: 2.45 m)
         cp.update(
             blind_travel_view_deg=10.0, blind_travel_memory_s=30.0, look_yields_fov=False,
-            hold_band_barrier=False,
+            hold_band_barrier=False, **_BEFORE_STOP,
         )  # fmt: skip
     fk = {"controller_params": cp}
     if not bearings:  # and the tracker of then (the fused recovery: 2.36 m)
@@ -347,6 +353,35 @@ def test_filter_keeps_a_well_behaved_policys_progress(seed):
     assert filt.final_eta >= 0.93 * alone.final_eta, (filt.final_eta, alone.final_eta)
 
 
+@pytest.mark.parametrize("stop, alone_min, alone_max", [(True, 0.3, 1.0), (False, 0.0, 0.05)])
+def test_narrow_view_team_turns_to_look_instead_of_standing_still(stop, alone_min, alone_max):
+    """pfcbf at β = 45° (N = 6, seed 7): a blind row straight ahead holds (b = 0), the QP
+    keeps a 0.01 m/s creep along it and the look turn; the arc guard (safety Section 1c)
+    used to slow that turn to nothing, so the robots neither moved nor looked: η 0.033
+    after 30 s (0.059 after 60 s). With ``arc_guard_stop`` the robot stops the creep and
+    turns: measured 0.45 after 30 s (0.96 after 60 s), no collision. Behind the filter
+    too (β = 90°, seed 0): η after 30 s 0.53 without, 0.98 with (measured)."""
+    cp = {"arc_guard_stop": stop}
+    rec = run_episode(
+        "coverage", "pfcbf", 7, n_agents=6, fov_deg=45.0, max_steps=150,
+        policy_kwargs={"controller_params": cp},
+    )  # fmt: skip
+    assert rec.collisions == 0 and rec.safety_violations == 0
+    assert alone_min <= rec.final_eta <= alone_max, rec.final_eta
+
+
+@pytest.mark.parametrize("stop, lo, hi", [(True, 0.9, 1.0), (False, 0.0, 0.7)])
+def test_filter_narrow_view_turns_to_look_instead_of_standing_still(stop, lo, hi):
+    """The same stall behind the filter (pfcbf, β = 90°, N = 6, seed 0): η after 30 s."""
+    rec = run_episode(
+        "coverage", "pfcbf", 0, n_agents=6, fov_deg=90.0, max_steps=150, safety_filter=True,
+        policy_kwargs={"controller_params": {"arc_guard_stop": stop}},
+        safety_filter_kwargs={"controller_params": {"arc_guard_stop": stop}},
+    )  # fmt: skip
+    assert rec.collisions == 0 and rec.safety_violations == 0
+    assert lo <= rec.final_eta <= hi, rec.final_eta
+
+
 @pytest.mark.parametrize("credit_m", [0.0, 0.5])
 def test_filter_budget_gives_no_credit_for_backing_away(credit_m):
     """head_on, N = 12, β = 120°, head_on_pair start, seed 9000: the one D_s breach from
@@ -361,8 +396,9 @@ def test_filter_budget_gives_no_credit_for_backing_away(credit_m):
     from fov_marl.stress import StressCase, run_stress_episode
 
     fk = {"controller_params": {"blind_travel_credit_m": credit_m}}
-    if credit_m > 0.0:  # on the tracker of then (the fused recovery sends it elsewhere)
+    if credit_m > 0.0:  # on the tracker and guard of then (both send it elsewhere)
         fk["tracker_params"] = _BEFORE_FUSION
+        fk["controller_params"].update(_BEFORE_STOP)
     case = StressCase("head_on", 12, 120.0, "head_on_pair", filter_kwargs=fk)
     ep = run_stress_episode(case, 9000, 300)
     assert ep["collisions"] == 0, ep
@@ -387,7 +423,7 @@ def test_filter_holds_d_s_when_a_seen_neighbours_cloud_overshoots(bias_alpha):
 
     fk = {"tracker_params": {"recovery_bias_alpha": bias_alpha}}
     if bias_alpha == 0.0:  # and the tracker's re-seed of then (before ``ess_recovery``)
-        fk["controller_params"] = {"hold_band_barrier": False}
+        fk["controller_params"] = {"hold_band_barrier": False, **_BEFORE_STOP}
         fk["tracker_params"] = {**_BEFORE_FUSION, "recovery_bias_alpha": 0.0}
     case = StressCase("chase_last_seen", 24, 120.0, "random", filter_kwargs=fk)
     ep = run_stress_episode(case, 9100, 180)
@@ -427,10 +463,17 @@ def test_filter_budget_without_the_glance_stalls_a_well_behaved_policy():
     0.538 after 30 s against 0.996 alone; 0.499 when found), so that test can fail. It
     runs pfcbf as it was then, blind to the filter's changes to its actions
     (``adopt_applied=False``; knowing them: 0.599) and with its own settings of then
-    (``_PFCBF_BEFORE_BEARINGS``: with its own glance pfcbf turns to look itself)."""
+    (``_PFCBF_BEFORE_BEARINGS``: with its own glance pfcbf turns to look itself), and
+    on the arc guard of then (``_BEFORE_STOP``: with the stop the filter without the glance
+    kept 0.948 against 0.996, the robots turning in place where the guard had stopped
+    their turn)."""
     pk = {"adopt_applied": False, "controller_params": _PFCBF_BEFORE_BEARINGS}
     alone = run_episode("coverage", "pfcbf", 10, n_agents=6, max_steps=150, policy_kwargs=pk)
-    fk = {"controller_params": {"look_yields_fov": False, "blind_travel_memory_s": 30.0}}
+    fk = {
+        "controller_params": {
+            "look_yields_fov": False, "blind_travel_memory_s": 30.0, **_BEFORE_STOP,
+        }
+    }  # fmt: skip
     filt = run_episode(
         "coverage", "pfcbf", 10, n_agents=6, max_steps=150, safety_filter=True,
         safety_filter_kwargs=fk, policy_kwargs=pk,

@@ -531,8 +531,9 @@ class BatchedFovCbfController:
                     self.stats["safety_fallbacks"] += int(f.size)
                 if p.arc_yaw_guard:  # safety Section 1c: the step's arc
                     res_u[qi] = arc_yaw_guard(
-                        res_u[qi], sA[qi], sb[qi], sk[qi], skeep[qi], cfg.dt_s
-                    )
+                        res_u[qi], sA[qi], sb[qi], sk[qi], skeep[qi], cfg.dt_s,
+                        stop_weight=self._w if p.arc_guard_stop else None,
+                    )  # fmt: skip
         t2 = time.perf_counter()
         du = res_u - self._project(u_given)
         intervened = np.sqrt(np.einsum("rk,rk->r", du, du)) > p.intervention_tol

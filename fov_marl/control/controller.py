@@ -814,7 +814,10 @@ class FovCbfController:
             st["safety_fallbacks"] += 1
         if sb.size and p.arc_yaw_guard:  # safety Section 1c: the step's arc
             keep = np.ones((1, sb.size), dtype=bool)
-            u = arc_yaw_guard(u[None], sA[None], sb[None], sk[None], keep, cfg.dt_s)[0]
+            u = arc_yaw_guard(
+                u[None], sA[None], sb[None], sk[None], keep, cfg.dt_s,
+                stop_weight=self._w if p.arc_guard_stop else None,
+            )[0]  # fmt: skip
         du = u - (u_proj if u_star is u_given else self._project(u_given))
         intervened = bool(math.sqrt(float(du @ du)) > p.intervention_tol)
         st["qp_solves"] += qres.n_qp

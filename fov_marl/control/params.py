@@ -184,6 +184,14 @@ field                        default   source / reason
                                        straight step does (:mod:`~fov_marl.control.
                                        safety` Section 1c; without it a packed pair
                                        creeping while turning closed 1.1 to 1.098 m)
+``arc_guard_stop``           True      where the guard would slow the turn and every
+                                       row holds at standstill, the robot stops
+                                       translating and keeps the turn instead, if that
+                                       is the smaller change (``‖Δv‖² + λ² Δω²``);
+                                       without it a robot creeping at 0.01 m/s along a
+                                       held blind row could not turn to look, and
+                                       stood still (pfcbf, β = 45°, seed 7: η 0.06
+                                       after 60 s, 0.96 with it)
 ``hold_cleanup``             True      an output that approaches a held collision row
                                        (b ≤ 0) within the cascade's tolerance is moved
                                        to the nearest input that approaches none
@@ -392,6 +400,10 @@ class ControllerParams:
             retreats is straight (ω = 0).
         arc_yaw_guard: limit the output's yaw rate so the step's arc approaches no
             held line of sight (:func:`~fov_marl.control.safety.arc_yaw_guard`).
+        arc_guard_stop: where the arc guard would slow the turn, stop the translation
+            and keep the turn instead when every row holds at standstill and that
+            changes the output less (``stop_weight`` of
+            :func:`~fov_marl.control.safety.arc_yaw_guard`); False: always slow the turn.
         hold_cleanup: correct an output creeping towards a held collision row within
             the cascade's tolerance (:func:`~fov_marl.control.controller.hold_cleanup`).
         look_yields_fov: leave the FoV rows out of the step of a robot the look before
@@ -471,6 +483,7 @@ class ControllerParams:
     fallback_tie_mps: float = 0.25
     fallback_straight: bool = True
     arc_yaw_guard: bool = True
+    arc_guard_stop: bool = True
     hold_cleanup: bool = True
     look_yields_fov: bool = False
     walls: bool = True
@@ -530,6 +543,7 @@ class ControllerParams:
             "lost_fov_yield_latch",
             "fallback_straight",
             "arc_yaw_guard",
+            "arc_guard_stop",
             "hold_cleanup",
             "look_yields_fov",
             "hold_band_barrier",

@@ -418,6 +418,7 @@ def arc_yaw_guard(
     keep: np.ndarray,
     dt: float,
     eps_mps: float = 1e-6,
+    stop_weight: float | None = None,
 ) -> np.ndarray:
     """Section 1c: the yaw rate limited so the step's arc approaches no held line.
 
@@ -427,12 +428,46 @@ def arc_yaw_guard(
             normalised: any positive scale per row), ``A = [−n s, 0]``.
         kind: ``(F, K)`` row kinds; keep: ``(F, K)`` bool, the rows that exist.
         dt: the step (s). eps_mps: the tolerance ε (m/s).
+        stop_weight: λ of the QP metric ``‖Δv‖² + λ² Δω²`` (m/rad), or None. Where ω
+            would be clipped, every kept row holds at standstill (``A (0, 0, ω) + b ≥ 0``)
+            and ``‖v‖² < λ² (ω − ω_clipped)²``, the input ``(0, 0, ω)`` is returned
+            instead: the robot stops translating and keeps its turn (no translation
+            approaches nothing, whatever the arc). None: always clip.
 
     Returns:
         ``(F, 3)``: ``u`` with ω clipped to the interval (containing 0) where, for every
         neighbour, blind or cone row with ``b ≤ 0``, ``a cos(φ/2) + q sin(φ/2) ≤
-        max(a, 0) + ε`` (``a = n · v``, ``q = n · J v``, φ = ω dt); translation unchanged.
+        max(a, 0) + ε`` (``a = n · v``, ``q = n · J v``, φ = ω dt); translation unchanged
+        (or, with ``stop_weight``, the translation dropped and ω unchanged).
     """
+    u_in = np.asarray(u, dtype=np.float64)
+    g = _arc_yaw_clip(u_in, A, b, kind, keep, dt, eps_mps)
+    if stop_weight is None:
+        return g
+    slowed = g[:, 2] != u_in[:, 2]
+    if not slowed.any():
+        return g
+    A = np.asarray(A, dtype=np.float64)
+    at_rest = A[..., 2] * u_in[:, None, 2] + np.asarray(b, dtype=np.float64)
+    holds = np.where(np.asarray(keep, dtype=bool), at_rest >= 0.0, True).all(axis=1)
+    cost_stop = u_in[:, 0] ** 2 + u_in[:, 1] ** 2
+    cost_clip = (stop_weight * (u_in[:, 2] - g[:, 2])) ** 2
+    stop = slowed & holds & (cost_stop < cost_clip)
+    g[stop, :2] = 0.0
+    g[stop, 2] = u_in[stop, 2]
+    return g
+
+
+def _arc_yaw_clip(
+    u: np.ndarray,
+    A: np.ndarray,
+    b: np.ndarray,
+    kind: np.ndarray,
+    keep: np.ndarray,
+    dt: float,
+    eps_mps: float,
+) -> np.ndarray:
+    """:func:`arc_yaw_guard` without ``stop_weight``: ω clipped, translation kept."""
     u = np.array(u, dtype=np.float64, copy=True)
     A = np.asarray(A, dtype=np.float64)
     on = (

@@ -965,8 +965,10 @@ def test_controllers_apply_the_arc_guard_alike():
     safety = rows.robot(0)
     u_star = np.array([0.05, 0.0, CFG.omega_max_radps])
     out = {}
-    for guard in (True, False):
-        p = ControllerParams(arc_yaw_guard=guard, look_gain=0.0, motion_cone=False)
+    for guard, stop in ((True, False), (True, True), (False, True)):
+        p = ControllerParams(
+            arc_yaw_guard=guard, arc_guard_stop=stop, look_gain=0.0, motion_cone=False
+        )
         one = FovCbfController(CFG, p).solve(
             u_star, mean, np.zeros((1, 2)), np.zeros(1), safety=safety,
             detected=np.array([False]),
@@ -976,9 +978,66 @@ def test_controllers_apply_the_arc_guard_alike():
             detected=np.array([[False]]),
         )  # fmt: skip
         np.testing.assert_allclose(many.u[0], one.u, atol=1e-9)
-        out[guard] = one.u
-    assert out[False][2] > 0.5 * CFG.omega_max_radps  # unguarded: the FoV levels turn left
-    assert abs(out[True][2]) < 1e-3 and out[True][:2].tolist() == out[False][:2].tolist()
+        out[guard, stop] = one.u
+    free = out[False, True]
+    assert free[2] > 0.5 * CFG.omega_max_radps  # unguarded: the FoV levels turn left
+    assert free[0] > 0.0  # ... while creeping forward
+    slowed = out[True, False]  # the guard keeps the creep and slows the turn
+    assert abs(slowed[2]) < 1e-3 and slowed[:2].tolist() == free[:2].tolist()
+    stopped = out[True, True]  # the creep costs less than the turn: stop and turn
+    assert stopped[:2].tolist() == [0.0, 0.0] and stopped[2] == free[2]
+
+
+def test_arc_guard_stop_keeps_the_turn_when_the_creep_is_cheaper():
+    """``stop_weight``: the traced stall (pfcbf, β = 45°, seed 7, robot 2): a blind row
+    straight ahead holds (b = 0), the QP keeps a 0.01 m/s creep along it and the look
+    turn at 1.05 rad/s; the plain guard slows that turn to ~0 and the robot neither moves
+    nor looks. With the stop it turns in place. A fast crossing with a small turn keeps its
+    translation (the slowed turn is the smaller change), and a row that needs a retreat
+    (b < 0: standstill breaks it) never lets it stop."""
+    A = np.array([[[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]])  # nothing ahead, nothing left
+    kind = np.array([[ROW_BLIND, ROW_NEIGHBOUR]], np.int8)
+    keep = np.ones((1, 2), bool)
+    b = np.array([[0.0, 0.8]])
+    creep = np.array([[0.0, -0.01, 1.05]])
+    plain = arc_yaw_guard(creep, A, b, kind, keep, CFG.dt_s)
+    assert abs(plain[0, 2]) < 2e-3 and plain[0, :2].tolist() == [0.0, -0.01]
+    turned = arc_yaw_guard(creep, A, b, kind, keep, CFG.dt_s, stop_weight=1.0)
+    assert turned[0].tolist() == [0.0, 0.0, 1.05]
+    # a heavier yaw weight makes the slowed turn costlier still; a tiny one keeps the creep
+    assert arc_yaw_guard(creep, A, b, kind, keep, CFG.dt_s, stop_weight=1e-3)[0].tolist() == (
+        plain[0].tolist()
+    )
+    fast = np.array([[0.0, 0.9, -0.05]])  # sliding right across the held row, turning right
+    g = arc_yaw_guard(fast, A, b, kind, keep, CFG.dt_s, stop_weight=1.0)
+    assert g[0, :2].tolist() == [0.0, 0.9] and abs(g[0, 2]) < abs(fast[0, 2])
+    retreat = np.array([[0.0, 0.8]]) - np.array([[0.0, 1.0]])  # the left row asks to back off
+    np.testing.assert_array_equal(
+        arc_yaw_guard(creep, A, retreat, kind, keep, CFG.dt_s, stop_weight=1.0),
+        arc_yaw_guard(creep, A, retreat, kind, keep, CFG.dt_s),
+    )
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 100_000), st.integers(1, 8), st.floats(0.1, 10.0))
+def test_arc_guard_stop_is_the_cheaper_of_two_safe_inputs(seed, k, lam):
+    """With ``stop_weight = λ`` the guard returns the plain guard's input or the turn in
+    place ``(0, 0, ω)``: the latter only where the plain guard slowed the turn, every
+    row holds at standstill, and it is strictly nearer the input in ``‖Δv‖² + λ² Δω²``.
+    Either way no held row is approached on the exact arc beyond the straight step."""
+    rng = np.random.default_rng(seed)
+    n, A, b, kind, u = _guard_case(rng, k)
+    keep = np.ones((1, k), bool)
+    plain = arc_yaw_guard(u, A, b, kind, keep, CFG.dt_s)
+    g = arc_yaw_guard(u, A, b, kind, keep, CFG.dt_s, stop_weight=lam)
+    assert _worst_excess(n, b, kind, g) <= 1e-12
+    if g.tolist() == plain.tolist():
+        cheaper = u[0, 0] ** 2 + u[0, 1] ** 2 < (lam * (u[0, 2] - plain[0, 2])) ** 2
+        assert not (plain[0, 2] != u[0, 2] and (b >= 0.0).all() and cheaper)
+    else:
+        assert g[0].tolist() == [0.0, 0.0, u[0, 2]]
+        assert plain[0, 2] != u[0, 2] and (b >= 0.0).all()
+        assert u[0, 0] ** 2 + u[0, 1] ** 2 < (lam * (u[0, 2] - plain[0, 2])) ** 2
 
 
 def test_hold_cleanup_removes_a_creep_and_keeps_the_rest():
