@@ -227,10 +227,15 @@ def filter_controller_defaults(config: Any, overrides: Any = None) -> dict[str, 
     Without the credit for backing away (``blind_travel_credit_m = 0``, since a neighbour
     that followed a robot unseen was approached 0.9 m blind): 0.9945, 21.3 s (median
     13.7 s), 20 of 20.
-    Narrow views stay costly: pfcbf behind the filter, η after 30 s, seeds 0 / 7 / 9, is
-    0.77 / 0.11 / 0.02 at 90° and 0.20 / 0.006 / 0.010 at 45° (alone 0.99 / 0.99 / 0.99 and
-    0.99 / 0.83 / 0.96): a robot there must glance every 0.6-0.8 m, and pfcbf's own FoV
-    levels (inside the policy) turn it back while the filter's turn it away.
+    Narrow views stay costly. pfcbf behind the filter, η after 30 s, seeds 0 / 7 / 9:
+    0.98 / 0.41 / 0.99 at 90° and 0.82 / 0.010 / 0.084 at 45° (alone 0.99 / 0.99 / 0.98 and
+    0.985 / 0.45 / 0.87). Before the arc guard could stop a creep to keep the turn
+    (``arc_guard_stop``, safety Section 1c) they were 0.53 / 0.38 / 0.42 and 0.40 / 0.011 /
+    0.013 (alone 0.98 / 0.95 / 0.91 and 0.95 / 0.033 / 0.40). What still stops the
+    robots at 45° (traced, seed 7): the particles of the unseen neighbours lie along the
+    edges of the narrow view, so the blind rows (safety Section 2) hold straight ahead;
+    the robot glances left and right, and while it looks one way the clouds spread back
+    into the other.
     """
     out = dict(FILTER_CONTROLLER_DEFAULTS)
     if isinstance(overrides, ControllerParams):
