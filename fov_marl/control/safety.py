@@ -452,34 +452,6 @@ def arc_yaw_guard(
         max(a, 0) + ε`` (``a = n · v``, ``q = n · J v``, φ = ω dt); translation unchanged
         (or, with ``stop_weight``, the translation dropped and ω unchanged).
     """
-    u_in = np.asarray(u, dtype=np.float64)
-    g = _arc_yaw_clip(u_in, A, b, kind, keep, dt, eps_mps)
-    if stop_weight is None:
-        return g
-    slowed = g[:, 2] != u_in[:, 2]
-    if not slowed.any():
-        return g
-    A = np.asarray(A, dtype=np.float64)
-    at_rest = A[..., 2] * u_in[:, None, 2] + np.asarray(b, dtype=np.float64)
-    holds = np.where(np.asarray(keep, dtype=bool), at_rest >= 0.0, True).all(axis=1)
-    cost_stop = u_in[:, 0] ** 2 + u_in[:, 1] ** 2
-    cost_clip = (stop_weight * (u_in[:, 2] - g[:, 2])) ** 2
-    stop = slowed & holds & (cost_stop < cost_clip)
-    g[stop, :2] = 0.0
-    g[stop, 2] = u_in[stop, 2]
-    return g
-
-
-def _arc_yaw_clip(
-    u: np.ndarray,
-    A: np.ndarray,
-    b: np.ndarray,
-    kind: np.ndarray,
-    keep: np.ndarray,
-    dt: float,
-    eps_mps: float,
-) -> np.ndarray:
-    """:func:`arc_yaw_guard` without ``stop_weight``: ω clipped, translation kept."""
     u = np.array(u, dtype=np.float64, copy=True)
     A = np.asarray(A, dtype=np.float64)
     on = (
@@ -504,7 +476,20 @@ def _arc_yaw_clip(
     half = np.arccos(np.clip(c / np.where(bind, rho, 1.0), -1.0, 1.0))
     hi = np.where(bind & (q > 0.0), np.maximum(th0 - half, 0.0), np.inf).min(axis=1)
     lo = np.where(bind & (q < 0.0), np.minimum(th0 + half, 0.0), -np.inf).max(axis=1)
-    u[:, 2] = np.clip(u[:, 2], 2.0 * lo / dt, 2.0 * hi / dt)
+    w_in = u[:, 2].copy()
+    u[:, 2] = np.clip(w_in, 2.0 * lo / dt, 2.0 * hi / dt)
+    if stop_weight is None:
+        return u
+    slowed = u[:, 2] != w_in
+    if not slowed.any():
+        return u
+    # the turn in place (0, 0, ω): allowed where every kept row holds at standstill
+    at_rest = A[..., 2] * w_in[:, None] + np.asarray(b, dtype=np.float64)
+    holds = np.where(np.asarray(keep, dtype=bool), at_rest >= 0.0, True).all(axis=1)
+    cost_stop = u[:, 0] ** 2 + u[:, 1] ** 2
+    stop = slowed & holds & (cost_stop < (stop_weight * (w_in - u[:, 2])) ** 2)
+    u[stop, :2] = 0.0
+    u[stop, 2] = w_in[stop]
     return u
 
 
