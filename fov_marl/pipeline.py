@@ -79,12 +79,15 @@ Controller = Literal["auto", "batched", "loop"]
 _FOV_ROW_COLS = np.array([k for k in range(4) if k != SAFETY_ROW])
 #: look-before-leap turns a robot once its budget is this spent (fraction of B)
 _LOOK_FRACTION = 0.75
-#: ``controller="auto"`` uses the batched controller from this many env copies on. For one
-#: team the per-robot loop is as fast (measured, CPU ms per robot-step, recorded pfcbf
-#: steps: N = 6 0.31 batched / 0.31 loop, N = 8 0.25 / 0.32, N = 12 0.38 / 0.41, N = 24
-#: 0.76 / 0.71: the lockstep active-set steps are overhead-bound on a few robots) and it
-#: keeps the one-copy numbers bit for bit; over many copies the batched one is faster.
-AUTO_BATCHED_MIN_COPIES = 2
+#: ``controller="auto"`` uses the batched controller from this many env copies on: from
+#: one, since its QPs are solved by the per-robot solver's NNLS (:mod:`fov_marl.control.batch_qp`)
+#: and everything around them runs on the team's arrays. Measured (pfcbf, the paper's
+#: 40 m arena, β = 120°, seed 0, median of steps 100-160, ms per robot-step, batched /
+#: loop): N = 6 0.79 / 0.91, N = 24 0.88 / 1.18, N = 48 0.90 / 1.34; the two controllers'
+#: actions agree within 1.2e-10 over whole episodes (N = 48 x 150 steps, N = 6 x 300,
+#: N = 12 at 45° x 200, crossing N = 4 x 300). With the earlier lockstep active-set
+#: solver the loop was as fast for one team, and this was 2.
+AUTO_BATCHED_MIN_COPIES = 1
 
 
 class _LazyResults(Sequence):
@@ -99,9 +102,9 @@ class _LazyResults(Sequence):
     def __getitem__(self, i):  # type: ignore[override]
         if isinstance(i, slice):
             return [self[k] for k in range(*i.indices(self._n))]
+        if not -self._n <= i < self._n:  # also ends iteration (Sequence.__iter__)
+            raise IndexError(i)
         if self._batch is None:
-            if not -self._n <= i < self._n:
-                raise IndexError(i)
             return None
         return self._batch.robot(int(i) % self._n)
 
@@ -124,8 +127,9 @@ class PfCbfPipeline:
             :data:`AUTO_BATCHED_MIN_COPIES` copies on. Same actions either way (within
             1e-6, tested), but for degenerate ties: where the collision rows leave a
             point or a sliver (rows with b = 0 from several sides) the two solvers may
-            settle differently, both meeting every row within 1e-3 m/s (measured: 6 of
-            24,000 random robots; ``tests/control/test_batch_controller.py``).
+            settle differently, both meeting every row within 1e-3 m/s (measured: 2 of
+            10,800 random robots, where round-off of 1e-16 in the fixed rows' bounds decides
+            whether a level can be met exactly; ``tests/control/test_batch_controller.py``).
 
     Attributes:
         last_results: the :class:`~fov_marl.control.ControlResult` of every robot (row) at

@@ -152,6 +152,7 @@ def test_bench_json_reports_every_layer(capsys):
         "tracker",
         "control",
         "controller",
+        "issue10",
         "issue12",
     }
     # the acceptance summary: the env ratio at N = 6, B = 64 and the filter at B N = 384,
@@ -167,6 +168,10 @@ def test_bench_json_reports_every_layer(capsys):
     paper = [r for r in ctrl if r["arena"] == "paper"]
     assert paper and paper[0]["arena_size_m"] == 40.0 and paper[0]["warmup_steps"] >= 10
     assert {r["arena"] for r in ctrl} == {"scaled", "paper"}
+    # pfcbf's budget read from those paper-arena rows
+    (i10,) = [r for r in rows if r["section"] == "issue10"]
+    assert i10["measured"] == paper[0]["ms_per_robot_step"] and i10["goal"] == "<= 1 ms"
+    assert i10["met"] == (i10["measured"] <= 1.0)
     env6 = [r for r in rows if r["section"] == "env" and r["n_agents"] == 6]
     assert env6 and env6[0]["agent_steps_per_s"] > 0
 

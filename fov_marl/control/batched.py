@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fov_marl.config import ScenarioConfig
-from fov_marl.control.batch_qp import STATUS_CODES, BatchHierarchicalQP
+from fov_marl.control.batch_qp import _BIG_LEVEL, STATUS_CODES, BatchHierarchicalQP
 from fov_marl.control.cbf import (
     SAFETY_ROW,
     cbf_rows,
@@ -35,6 +35,7 @@ from fov_marl.control.cbf import (
     row_h_max,
 )
 from fov_marl.control.controller import (
+    _YIELD_BOUND_TOL,
     ControlResult,
     FovCbfController,
     approaches_held_row,
@@ -630,10 +631,22 @@ class BatchedFovCbfController:
         yielded = np.zeros(u.shape[0], dtype=bool)
         if not cand.any():
             return yielded
-        c_i = np.flatnonzero(cand)
-        alt = self._qp_solve(Aq[c_i], bq[c_i], lv[c_i], actq[c_i] & ~lost[c_i], usq[c_i])
         wt = np.array([1.0, 1.0, self._w * self._w])
+        c_i = np.flatnonzero(cand)
         cost_cur = ((u[c_i] - usq[c_i]) ** 2) @ wt
+        # the per-robot bound: the re-solve keeps every level above the first lost row's,
+        # so it costs at least the candidate that reached that level (the hierarchy for
+        # u*, before "keep right": _adopt leaves these fields as they were)
+        first = np.where(lost[c_i], lv[c_i], _BIG_LEVEL).min(axis=1)
+        ls = qres.level_sorted[c_i]
+        at = ls >= first[:, None]
+        j = np.argmax(at, axis=1)
+        bound = np.where(at.any(axis=1), qres.level_start_cost[c_i, j], np.nan)
+        skip = bound - 0.5 * cost_cur > _YIELD_BOUND_TOL  # NaN: no skip
+        if skip.all():
+            return yielded
+        c_i, cost_cur = c_i[~skip], cost_cur[~skip]
+        alt = self._qp_solve(Aq[c_i], bq[c_i], lv[c_i], actq[c_i] & ~lost[c_i], usq[c_i])
         cost_alt = ((alt.u - usq[c_i]) ** 2) @ wt
         use = ~alt.fallback & (cost_alt <= 0.5 * cost_cur)
         if not use.any():

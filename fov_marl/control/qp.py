@@ -269,13 +269,16 @@ def _direct_nnls() -> object | None:
 _nnls = _direct_nnls() or _public_nnls
 
 
-def _ldp(E: np.ndarray) -> np.ndarray | None:
-    """:func:`least_distance` on the stacked ``E = [Gᵀ; hᵀ]`` (``(n + 1, m)``, finite)."""
+def _ldp(E: np.ndarray, maxiter: int | None = None) -> np.ndarray | None:
+    """:func:`least_distance` on the stacked ``E = [Gᵀ; hᵀ]`` (``(n + 1, m)``, finite,
+    C-ordered float64); ``maxiter``: NNLS iteration cap (default ``20 (m + n + 1)``)."""
     n = E.shape[0] - 1
     f = np.zeros(n + 1)
     f[n] = 1.0
+    if maxiter is None:
+        maxiter = 20 * (E.shape[1] + n + 1)
     try:
-        z, rnorm = _nnls(E, f, 20 * (E.shape[1] + n + 1))
+        z, rnorm = _nnls(E, f, maxiter)
     except RuntimeError:
         return None
     if not rnorm > 1e-10:

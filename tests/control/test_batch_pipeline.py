@@ -33,7 +33,7 @@ def test_copies_equal_one_copy_pipelines(scenario, estimates):
     vec.reset_arrays(obs, [seed + k for k in range(B)], poses)
     one = []
     for k in range(B):
-        pl = PfCbfPipeline(cfg, estimates=estimates)
+        pl = PfCbfPipeline(cfg, estimates=estimates, controller="loop")
         assert pl.batched is None and len(pl.controllers) == N
         pl.reset({a: obs[k, i] for i, a in enumerate(envs[k].possible_agents)}, seed + k, poses[k])
         one.append(pl)
@@ -104,3 +104,20 @@ def test_pipeline_copy_errors():
         pl.reset_arrays(np.zeros((2, 3, 17)), [0, 1], np.zeros((3, 3)))
     with pytest.raises(ValueError, match="init='known'"):
         pl.reset_arrays(np.zeros((2, 3, 17)), [0, 1], None)
+
+
+def test_last_results_of_the_batched_controller_iterate_once_per_robot():
+    """``last_results`` is a lazy sequence over the batch: iterating it (as the safety
+    filter wrapper does) yields one result per robot and stops (it once wrapped around
+    forever, hidden while one team used the per-robot loop)."""
+    env = fov_coverage_v0.parallel_env(n_agents=4)
+    obs, _ = env.reset(seed=1)
+    pl = PfCbfPipeline(env.unwrapped.config, controller="batched")
+    pl.reset(obs, 1, env.unwrapped.poses)
+    pl.filter(pl.desired_inputs())
+    with pytest.raises(IndexError):  # first: without it the iteration below never ends
+        pl.last_results[4]
+    res = list(pl.last_results)
+    assert len(res) == 4 and all(r is not None for r in res)
+    np.testing.assert_array_equal(np.stack([r.u for r in res]), pl.last_batch.u)
+    assert pl.last_results[-1].status == res[-1].status

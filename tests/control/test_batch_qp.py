@@ -226,7 +226,7 @@ def _record_problems():
 
     env = fov_coverage_v0.parallel_env(n_agents=8)
     obs, _ = env.reset(seed=3)
-    pol = make_policy("pfcbf", env)
+    pol = make_policy("pfcbf", env, controller="loop")
     pol.reset(seed=3)
     calls = []
     for ctrl in pol.pipeline.controllers:
