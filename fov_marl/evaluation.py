@@ -18,7 +18,10 @@ it is split per stage (``cpu_ms_by_stage``: ``tracker``, ``lloyd``, ``safety_row
 and ``other``, the rest of ``act``; they add up to the total) and per robot
 (``cpu_ms_by_robot``): robot i is charged its own controller's ``solve`` (timed around
 each call) plus an equal share of the team-batched stages (the tracker bank, Lloyd,
-the safety rows), so the per-robot values sum to the team's time.
+the safety rows), so the per-robot values sum to the team's time. With the batched
+controller (the default, ``PfCbfPipeline(controller="auto")``) the QPs are solved for
+the whole team in one call, so every robot gets an equal share of the whole step; pass
+``controller="loop"`` to the policy to see each robot's own solve.
 """
 
 from __future__ import annotations
@@ -503,6 +506,8 @@ def _time_controller_solves(pipeline: Any, n: int) -> np.ndarray | None:
     methods of this episode's controller instances (created with the policy, so nothing
     outlives the episode) and returns the ``(N,)`` seconds array they add to."""
     ctrls = getattr(pipeline, "controllers", None)
+    if getattr(pipeline, "batched", None) is not None:
+        return np.zeros(n)  # one solve for the team: every robot gets an equal share
     if not ctrls or len(ctrls) != n:
         return None
     acc = np.zeros(n)

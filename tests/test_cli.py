@@ -7,6 +7,7 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from fov_marl.cli import main
@@ -482,3 +483,14 @@ def test_mp4_with_its_writer(tmp_path):
     argv = ["render", "--policy", "random", "--max-cycles", "4", "--every", "1", "--out"]
     assert main([*argv, str(out)]) == 0
     assert out.stat().st_size > 1000
+
+
+def test_pfcbf_episodes_charge_every_robot_its_share_of_the_cpu_time():
+    """The per-robot CPU split (evaluation docstring) with the batched controller (the
+    default: one solve for the team, equal shares) and with the per-robot loop; the
+    shares add up to the team's time either way (the report's scaling table reads them)."""
+    for kw in ({}, {"policy_kwargs": {"controller": "loop"}}):
+        r = run_episode("coverage", "pfcbf", 0, n_agents=4, max_steps=5, **kw)
+        per = np.asarray(r.cpu_ms_by_robot)
+        assert per.shape == (4,) and np.isfinite(per).all() and (per > 0).all()
+        assert per.sum() / 4 == pytest.approx(r.cpu_ms_per_robot_step, rel=0.05)
