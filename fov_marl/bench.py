@@ -10,7 +10,7 @@ in the same run, and the ratio; optionally ``vmas``, VMAS simple_spread on CPU w
 against one batched pipeline, :func:`bench_batched_filter`; also at the reduced
 particle budget :data:`FAST_FILTER_PARTICLES`), ``issue12`` (the acceptance figures of
 the batched core side by side, from the rows of the same run: env ratio at N = 6,
-B = 64; filter ms per robot-step at B N = 384; PPO samples/s when measured) and, with
+B = 64; filter ms per robot-step at B N = 384; PPO samples/s when measured),
 ``issue10`` (pfcbf's budget, ≤ 1 ms per robot-step at N = 6-48, from the ``controller``
 rows of the paper's 40 m arena after the warm-up) and, with
 ``ppo=True`` (``fov-marl bench --ppo``), ``ppo`` (:func:`bench_ppo`: PPO samples/s
@@ -576,32 +576,35 @@ def bench_ppo(
 ISSUE12_PPO_TODAY = {"no_filter": 6087.0, "filter": 1079.0}
 
 
+def _goal_row(
+    section: str, name: str, measured: float | None, goal: str, met: bool | None, **extra: Any
+) -> dict[str, Any]:
+    """One acceptance figure of :func:`issue10_summary` / :func:`issue12_summary`."""
+    row = {"section": section, "figure": name, "measured": measured, "goal": goal}
+    row.update(met=met, vs_per_copy=None, vs_issue_today=None, load_1min=None)
+    row.update(extra)
+    return row
+
+
 def issue10_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """pfcbf's speed budget (issue 10: ≤ 1 ms per robot-step at N = 6-48) from the
     ``controller`` rows of the paper's 40 m arena (the packed team, after the warm-up),
     in the row format of :func:`issue12_summary`."""
-    out: list[dict[str, Any]] = []
-    for r in rows:
-        if (
-            r.get("section") == "controller"
-            and r.get("arena") == "paper"
-            and r.get("safety_model") == "ellipse"
-            and 6 <= r["n_agents"] <= 48
-        ):
-            out.append(
-                {
-                    "section": "issue10",
-                    "figure": f"pfcbf ms/robot-step, N={r['n_agents']}, 40 m arena, "
-                    f"after {r['warmup_steps']} steps",
-                    "measured": r["ms_per_robot_step"],
-                    "goal": "<= 1 ms",
-                    "met": r["ms_per_robot_step"] <= 1.0,
-                    "vs_per_copy": None,
-                    "vs_issue_today": None,
-                    "load_1min": r.get("load_1min"),
-                }
-            )
-    return out
+    return [
+        _goal_row(
+            "issue10",
+            f"pfcbf ms/robot-step, N={r['n_agents']}, 40 m arena, after {r['warmup_steps']} steps",
+            r["ms_per_robot_step"],
+            "<= 1 ms",
+            r["ms_per_robot_step"] <= 1.0,
+            load_1min=r.get("load_1min"),
+        )
+        for r in rows
+        if r.get("section") == "controller"
+        and r.get("arena") == "paper"
+        and r.get("safety_model") == "ellipse"
+        and 6 <= r["n_agents"] <= 48
+    ]
 
 
 def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -611,10 +614,7 @@ def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     out: list[dict[str, Any]] = []
 
     def add(name: str, measured: float | None, goal: str, met: bool | None, **extra: Any):
-        row = {"section": "issue12", "figure": name, "measured": measured, "goal": goal}
-        row.update(met=met, vs_per_copy=None, vs_issue_today=None, load_1min=None)
-        row.update(extra)
-        out.append(row)
+        out.append(_goal_row("issue12", name, measured, goal, met, **extra))
 
     for r in rows:
         if r["section"] == "vector_env" and r["n_agents"] == 6 and r["num_envs"] == 64:
