@@ -476,6 +476,7 @@ def bench_ppo(
     per_copy_envs: int | None = 4,
     filter_particles: Sequence[int | None] = (None, FAST_FILTER_PARTICLES),
     seed: int = 0,
+    workers: Sequence[int] = (1,),
 ) -> list[dict[str, Any]]:
     """PPO samples/s (SB3, the trainer's default hyper-parameters, 1 torch thread).
 
@@ -489,7 +490,9 @@ def bench_ppo(
     ``model.learn`` over ``rollouts`` whole rollouts (``n_steps x B x N`` samples each:
     collection and the gradient epochs, as in training); ``train_share`` is the fraction
     of that time in PPO's gradient epochs (``PPO.train``), the part no env speed-up
-    reduces.
+    reduces. Each vector row is run for every ``workers`` W (``fov-marl train --workers
+    W``: the copies and the filter stepped in W processes, :class:`~fov_marl.envs.
+    SubprocVectorEnv`; W > B skipped); rows carry ``workers``.
 
     Needs the ``train`` extra (torch, stable-baselines3); returns no rows without it.
     """
@@ -514,14 +517,14 @@ def bench_ppo(
     prev = torch.get_num_threads()
     torch.set_num_threads(1)
 
-    def one(adapter: str, b: int, filt: bool, p_t: int | None) -> dict[str, Any]:
+    def one(adapter: str, b: int, filt: bool, p_t: int | None, w: int = 1) -> dict[str, Any]:
         sf_kw = {"tracker_params": {"n_particles_total": int(p_t)}} if p_t else None
 
         def factory() -> Any:
             return build_env("coverage", env_kw, safety_filter=filt, safety_filter_kwargs=sf_kw)
 
         if adapter == "vector":
-            _, venv = make_training_vec_env(b, factory, gamma=float(hp["gamma"]))
+            _, venv = make_training_vec_env(b, factory, gamma=float(hp["gamma"]), workers=w)
         else:
             ad = ParallelEnvVecEnv([factory for _ in range(b)])
             venv = VecNormalize(
@@ -545,6 +548,7 @@ def bench_ppo(
             "section": "ppo",
             "adapter": adapter,
             "n_envs": int(b),
+            "workers": int(w),
             "safety_filter": bool(filt),
             "n_particles_total": (int(p_t) if p_t else 2000) if filt else None,
             "samples": int(model.num_timesteps),
@@ -563,9 +567,12 @@ def bench_ppo(
                     base["ratio"] = 1.0
                     rows.append(base)
                 for b in n_envs:
-                    r = one("vector", int(b), filt, p_t)
-                    r["ratio"] = r["samples_per_s"] / base["samples_per_s"] if base else None
-                    rows.append(r)
+                    for w in workers:
+                        if int(w) > int(b):
+                            continue
+                        r = one("vector", int(b), filt, p_t, int(w))
+                        r["ratio"] = r["samples_per_s"] / base["samples_per_s"] if base else None
+                        rows.append(r)
     finally:
         torch.set_num_threads(prev)
     return rows
@@ -638,12 +645,15 @@ def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
         if r["section"] == "ppo" and r["adapter"] == "vector":
             if r["safety_filter"]:
                 today, goal = ISSUE12_PPO_TODAY["filter"], 3000.0
-                name = f"PPO samples/s, filter P_T={r['n_particles_total']}, B={r['n_envs']}"
+                name = (
+                    f"PPO samples/s, filter P_T={r['n_particles_total']}, B={r['n_envs']}, "
+                    f"workers={r.get('workers', 1)}"
+                )
                 text = ">= 3000"
             else:
                 today = ISSUE12_PPO_TODAY["no_filter"]
                 goal = 2.0 * today
-                name = f"PPO samples/s, no filter, B={r['n_envs']}"
+                name = f"PPO samples/s, no filter, B={r['n_envs']}, workers={r.get('workers', 1)}"
                 text = f">= 2 x {today:.0f} (issue's today)"
             add(
                 name,
@@ -691,6 +701,7 @@ def run_benchmarks(
             bench_ppo(
                 n_envs=(4, 16) if quick else (4, 16, 64),
                 filter_particles=(None, FAST_FILTER_PARTICLES),
+                workers=(1, 2),
             )
         )
     try:

@@ -133,6 +133,7 @@ from typing import Any
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from fov_marl.envs.base import FovEnvBase
+from fov_marl.envs.subproc import SubprocVectorEnv, make_vector_env
 from fov_marl.envs.vector import FovVectorEnv
 
 __all__ = ["raw_env", "parallel_env", "env", "vector_env", "FovCoverageEnv"]
@@ -160,7 +161,9 @@ def env(render_mode: str | None = None, **config: Any):
     return parallel_to_aec(parallel_env(render_mode=render_mode, **config))
 
 
-def vector_env(num_envs: int = 1, eta_method: str = "exact", **config: Any) -> FovVectorEnv:
+def vector_env(
+    num_envs: int = 1, eta_method: str = "exact", workers: int = 1, **config: Any
+) -> FovVectorEnv | SubprocVectorEnv:
     """``num_envs`` copies stepped together over arrays (see :mod:`fov_marl.envs.vector`).
 
     Copy k after ``reset(seed=s)`` is bit-identical to ``parallel_env(**config)`` after
@@ -168,6 +171,10 @@ def vector_env(num_envs: int = 1, eta_method: str = "exact", **config: Any) -> F
     in the same step. Keywords are :class:`~fov_marl.config.ScenarioConfig` fields.
     ``eta_method="strip"`` swaps the η of ``metrics["eta"]`` and of the reward for the
     ~3× cheaper :class:`~fov_marl.metrics.StripCoverageMetric` (training; its error is
-    documented there); the default ``"exact"`` is the ParallelEnv's η.
+    documented there); the default ``"exact"`` is the ParallelEnv's η. ``workers = W > 1``
+    steps the copies in W processes (:class:`~fov_marl.envs.subproc.SubprocVectorEnv`,
+    the same numbers; call ``close()`` when done).
     """
-    return FovVectorEnv(num_envs, "coverage", "fov_coverage_v0", config, eta_method=eta_method)
+    return make_vector_env(
+        "coverage", "fov_coverage_v0", num_envs, config, workers=workers, eta_method=eta_method
+    )

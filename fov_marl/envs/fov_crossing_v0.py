@@ -96,6 +96,7 @@ from typing import Any
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from fov_marl.envs.base import FovEnvBase
+from fov_marl.envs.subproc import SubprocVectorEnv, make_vector_env
 from fov_marl.envs.vector import FovVectorEnv
 
 __all__ = ["raw_env", "parallel_env", "env", "vector_env", "FovCrossingEnv"]
@@ -123,11 +124,16 @@ def env(render_mode: str | None = None, **config: Any):
     return parallel_to_aec(parallel_env(render_mode=render_mode, **config))
 
 
-def vector_env(num_envs: int = 1, **config: Any) -> FovVectorEnv:
+def vector_env(
+    num_envs: int = 1, workers: int = 1, **config: Any
+) -> FovVectorEnv | SubprocVectorEnv:
     """``num_envs`` copies stepped together over arrays (see :mod:`fov_marl.envs.vector`).
 
     Copy k after ``reset(seed=s)`` is bit-identical to ``parallel_env(**config)`` after
     ``reset(seed=s + k)`` under the same actions; finished copies reset automatically
     in the same step. Keywords are :class:`~fov_marl.config.ScenarioConfig` fields.
+    ``workers = W > 1`` steps the copies in W processes
+    (:class:`~fov_marl.envs.subproc.SubprocVectorEnv`, the same numbers; call
+    ``close()`` when done).
     """
-    return FovVectorEnv(num_envs, "crossing", "fov_crossing_v0", config)
+    return make_vector_env("crossing", "fov_crossing_v0", num_envs, config, workers=workers)

@@ -68,13 +68,43 @@ from fov_marl.envs.base import scenario_config
 from fov_marl.envs.core import CORES, BatchedCore
 from fov_marl.validation import check_seed, describe
 
-__all__ = ["FovVectorEnv"]
+__all__ = ["FovVectorEnv", "check_num_envs", "check_vector_actions"]
 
 
-def _check_num_envs(num_envs: Any) -> int:
+def check_num_envs(num_envs: Any) -> int:
+    """``num_envs`` as an int ≥ 1, else ``ValueError`` naming it."""
     if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
         raise ValueError(f"num_envs must be an integer in [1, inf), got {describe(num_envs)}")
     return int(num_envs)
+
+
+def check_vector_actions(actions: Any, num_envs: int, n_agents: int) -> np.ndarray:
+    """``actions`` as a float64 ``(num_envs, n_agents, 3)`` array: any real (integer or
+    floating) array-like of that shape with finite entries; another shape, a
+    non-numeric, boolean or complex dtype, NaN or inf raise ``ValueError`` naming
+    ``actions`` (and the copy and robot of a non-finite entry). Not clipped here."""
+    shape = (num_envs, n_agents, 3)
+    try:
+        a = np.asarray(actions)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"actions must be a real array of shape {shape}: {exc}") from None
+    if a.dtype == bool or a.dtype.kind not in "iuf":
+        raise ValueError(
+            f"actions must be a real (integer or floating) array of shape {shape}, "
+            f"got dtype {a.dtype}"
+        )
+    if a.shape != shape:
+        raise ValueError(
+            f"actions must have shape (num_envs, n_agents, 3) = {shape}, got {a.shape}"
+        )
+    a = a.astype(np.float64, copy=False)
+    if not np.isfinite(a).all():
+        k, i = np.argwhere(~np.isfinite(a).all(axis=-1))[0]
+        raise ValueError(
+            f"actions must be finite, got {a[k, i].tolist()} at actions[{k}, {i}] "
+            f"(copy {k}, robot_{i})"
+        )
+    return a
 
 
 class FovVectorEnv:
@@ -109,7 +139,7 @@ class FovVectorEnv:
         config: ScenarioConfig | None = None,
         eta_method: str = "exact",
     ) -> None:
-        B = _check_num_envs(num_envs)
+        B = check_num_envs(num_envs)
         if scenario not in CORES:
             raise ValueError(f"scenario must be one of {sorted(CORES)}, got {describe(scenario)}")
         if config is None:
@@ -197,7 +227,7 @@ class FovVectorEnv:
         """
         if self._needs_reset:
             raise ValueError("step() called before reset(); call reset() first")
-        act = self._validate_actions(actions)
+        act = check_vector_actions(actions, self.num_envs, self.n_agents)
         core = self._core
         obs, rew, term, metrics = core.step(act)
         trunc = (core.num_steps >= self.max_cycles) & ~term
@@ -217,30 +247,6 @@ class FovVectorEnv:
         terminations = np.repeat(term[:, None], N, axis=1)
         truncations = np.repeat(trunc[:, None], N, axis=1)
         return obs, rew.astype(np.float32), terminations, truncations, infos
-
-    def _validate_actions(self, actions: Any) -> np.ndarray:
-        shape = (self.num_envs, self.n_agents, 3)
-        try:
-            a = np.asarray(actions)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"actions must be a real array of shape {shape}: {exc}") from None
-        if a.dtype == bool or a.dtype.kind not in "iuf":
-            raise ValueError(
-                f"actions must be a real (integer or floating) array of shape {shape}, "
-                f"got dtype {a.dtype}"
-            )
-        if a.shape != shape:
-            raise ValueError(
-                f"actions must have shape (num_envs, n_agents, 3) = {shape}, got {a.shape}"
-            )
-        a = a.astype(np.float64, copy=False)
-        if not np.isfinite(a).all():
-            k, i = np.argwhere(~np.isfinite(a).all(axis=-1))[0]
-            raise ValueError(
-                f"actions must be finite, got {a[k, i].tolist()} at actions[{k}, {i}] "
-                f"(copy {k}, robot_{i})"
-            )
-        return a
 
     # ------------------------------------------------------------- ground truth
     @property

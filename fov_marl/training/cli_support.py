@@ -169,6 +169,13 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         help="env copies (each robot of each copy is one SB3 slot), in [1, 1024]",
     )
     parser.add_argument(
+        "--workers",
+        type=_int_in("--workers", 1, 1024),
+        default=1,
+        help="processes stepping the env copies and the safety filter, in [1, --n-envs] "
+        "(the same numbers; one core each; not with --belief)",
+    )
+    parser.add_argument(
         "--n-agents",
         type=_int_in("--n-agents", 1, 256),
         default=None,
@@ -404,6 +411,7 @@ def run_train(args: argparse.Namespace) -> Path | int:
             seed=args.seed,
             out_dir=out,
             n_envs=args.n_envs,
+            workers=args.workers,
             env_kwargs=env_kwargs,
             hyperparams=hyperparams,
             train_max_cycles=args.train_max_cycles,

@@ -112,6 +112,7 @@ import time
 import warnings
 import zipfile
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -253,6 +254,7 @@ def make_training_vec_env(
     eta_method: str = "exact",
     norm_obs: bool = True,
     wrap_adapter: Callable[[Any], Any] | None = None,
+    workers: int = 1,
 ) -> tuple[Any, Any]:
     """``(adapter, vec_env)``: the adapter, then ``VecMonitor`` and optionally ``VecNormalize``.
 
@@ -270,43 +272,58 @@ def make_training_vec_env(
     :class:`~fov_marl.metrics.StripCoverageMetric` η; the default keeps the exact one.
     ``wrap_adapter(adapter)``, if given, wraps the adapter below ``VecMonitor`` (the
     set policy's :class:`~fov_marl.training.set_policy.CtdeVecEnvWrapper`);
-    ``norm_obs=False`` keeps ``VecNormalize`` to the rewards.
+    ``norm_obs=False`` keeps ``VecNormalize`` to the rewards. ``workers = W > 1`` (vector
+    paths only, ``W <= n_envs``) steps the copies in W processes
+    (:class:`~fov_marl.envs.SubprocVectorEnv`: the same numbers, W cores); the per-copy
+    path refuses it.
     """
     from fov_marl.envs.fov_coverage_v0 import FovCoverageEnv
     from fov_marl.envs.fov_crossing_v0 import FovCrossingEnv
-    from fov_marl.envs.vector import FovVectorEnv
     from fov_marl.training.vec_env import VectorEnvVecEnv
 
     if isinstance(n_envs, bool) or not isinstance(n_envs, int | np.integer) or n_envs < 1:
         raise ValueError(f"n_envs must be an integer in [1, inf), got {n_envs!r}")
-    from fov_marl.wrappers import SafetyFilterWrapper, VectorSafetyFilterWrapper
+    workers = check_int("workers", workers, 1, int(n_envs), note="(at most n_envs)")
+    from fov_marl.envs import SubprocVectorEnv, build_raw_vector_env
+    from fov_marl.wrappers import SafetyFilterWrapper, build_filtered_vector_env
 
     raw = (FovCoverageEnv, FovCrossingEnv)
     probe = env_factory()
     adapter: Any
+    make: Callable[[int], Any] | None = None
     if type(probe) in raw and probe.render_mode is None:
-        vector = FovVectorEnv.from_config(probe.config, int(n_envs), eta_method=eta_method)
-        vector.max_cycles = probe.max_cycles
-        probe.close()
-        adapter = VectorEnvVecEnv(vector)
+        make = partial(
+            build_raw_vector_env,
+            config=probe.config,
+            max_cycles=probe.max_cycles,
+            eta_method=eta_method,
+        )
     elif (
         type(probe) is SafetyFilterWrapper
         and type(probe.env) in raw
         and probe.env.render_mode is None
     ):
         # the filter over all copies at once: one tracker bank, one batched controller
-        vector = FovVectorEnv.from_config(probe.config, int(n_envs), eta_method=eta_method)
-        vector.max_cycles = probe.env.max_cycles
         pipe = probe.pipeline
-        filtered = VectorSafetyFilterWrapper(
-            vector,
+        make = partial(
+            build_filtered_vector_env,
+            config=probe.config,
+            max_cycles=probe.env.max_cycles,
+            eta_method=eta_method,
             init=pipe.init,
             tracker_params=pipe.tracker_params,
             controller_params=pipe.controller_params,
         )
+    if make is not None:
         probe.close()
-        adapter = VectorEnvVecEnv(filtered)
+        vector = make(int(n_envs)) if workers == 1 else SubprocVectorEnv(make, int(n_envs), workers)
+        adapter = VectorEnvVecEnv(vector)
     else:
+        if workers != 1:
+            raise ValueError(
+                f"workers = {workers} needs a vector path (a raw scenario env, alone or "
+                "behind the safety filter); this env is stepped per copy"
+            )
         if eta_method != "exact":
             raise ValueError(
                 f"eta_method={eta_method!r} needs a raw scenario env (no wrappers); "
@@ -740,6 +757,7 @@ def train(
     blind_motion_coef: float = 0.0,
     action_cost_coef: float = 0.0,
     fov_keep_coef: float = 0.0,
+    workers: int = 1,
 ) -> Path:
     """Train one shared policy for all robots and save it; return ``out_dir/model.zip``.
 
@@ -758,6 +776,9 @@ def train(
             non-directory, a path under one or an unwritable parent is an error before
             anything runs.
         n_envs: env copies, in [1, 1024].
+        workers: processes stepping the env copies (and the filter), in [1, n_envs]
+            (:class:`~fov_marl.envs.SubprocVectorEnv`; the same numbers as 1). Needs the
+            vector path: not with ``belief``.
         env_kwargs: scenario config fields (:class:`fov_marl.config.ScenarioConfig`).
         hyperparams: SB3 keyword overrides; ``policy_kwargs`` is merged with the default,
             ``activation_fn`` given by name (``"tanh"``, ``"relu"``, ...). Keys, types
@@ -810,12 +831,18 @@ def train(
     scenario = check_choice("scenario", scenario, sorted(SCENARIOS))
     timesteps = check_int("timesteps", timesteps, 1, 10**12)
     n_envs = check_int("n_envs", n_envs, 1, 1024)
+    workers = check_int("workers", workers, 1, int(n_envs), note="(at most n_envs)")
     checkpoint_every = check_int("checkpoint_every", checkpoint_every, 0)
     torch_threads = check_int("torch_threads", torch_threads, 1, 1024)
     seed = check_int("seed", seed, 0, MAX_SEED)
     verbose = check_int("verbose", verbose, 0, 2)
     safety_filter = check_bool("safety_filter", safety_filter)
     belief = check_bool("belief", belief)
+    if workers > 1 and belief:
+        raise ConfigError(
+            f"workers = {workers} needs the vector env; with belief the copies are stepped "
+            "one by one (use workers = 1)"
+        )
     normalize = check_bool("normalize", normalize)
     arch = check_choice("arch", arch, ("mlp", "set"))
     ctde = check_bool("ctde", ctde)
@@ -930,6 +957,7 @@ def train(
             gamma=float(hp.get("gamma", 0.99)),
             norm_obs=arch == "mlp",
             wrap_adapter=wrap_adapter,
+            workers=int(workers),
         )
         model: BaseAlgorithm = ALGOS[algo](
             policy_class, venv, seed=int(seed), device="cpu", verbose=verbose, **sb3_kwargs
@@ -1014,6 +1042,7 @@ def train(
         "timesteps_done": int(model.num_timesteps),
         "interrupted": interrupted,
         "n_envs": int(n_envs),
+        "workers": int(workers),
         "torch_threads": int(torch_threads),
         "train_wall_s": wall,
         "samples_per_s": model.num_timesteps / max(wall, 1e-9),

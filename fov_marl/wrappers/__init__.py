@@ -8,11 +8,15 @@
 
 from fov_marl.wrappers.belief import BeliefFeaturizer, BeliefObservationWrapper
 from fov_marl.wrappers.safety_filter import SafetyFilterWrapper
-from fov_marl.wrappers.vector_safety_filter import VectorSafetyFilterWrapper
+from fov_marl.wrappers.vector_safety_filter import (
+    VectorSafetyFilterWrapper,
+    build_filtered_vector_env,
+)
 
 __all__ = [
     "BeliefFeaturizer",
     "BeliefObservationWrapper",
     "SafetyFilterWrapper",
     "VectorSafetyFilterWrapper",
+    "build_filtered_vector_env",
 ]

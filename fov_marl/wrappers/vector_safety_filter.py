@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from fov_marl.config import ScenarioConfig
 from fov_marl.control import ControllerParams
 from fov_marl.control.batched import CONTROL_STATUSES
 from fov_marl.estimation import TrackerParams
@@ -47,7 +48,7 @@ from fov_marl.spaces import action_to_velocity
 from fov_marl.validation import check_params
 from fov_marl.wrappers.safety_filter import FILTER_TRACKER_DEFAULTS, filter_controller_params
 
-__all__ = ["VectorSafetyFilterWrapper"]
+__all__ = ["VectorSafetyFilterWrapper", "build_filtered_vector_env"]
 
 _STATUS = np.asarray(CONTROL_STATUSES, dtype=object)
 
@@ -189,3 +190,24 @@ class VectorSafetyFilterWrapper:
         close = getattr(self.venv, "close", None)
         if close is not None:
             close()
+
+
+def build_filtered_vector_env(
+    num_envs: int,
+    *,
+    config: ScenarioConfig,
+    max_cycles: int | None = None,
+    eta_method: str = "exact",
+    **filter_kwargs: Any,
+) -> VectorSafetyFilterWrapper:
+    """A vector env of ``config`` (``max_cycles`` set unless None) behind
+    ``VectorSafetyFilterWrapper(venv, **filter_kwargs)``; module-level, so
+    ``functools.partial`` of it is a picklable shard factory of
+    :class:`~fov_marl.envs.SubprocVectorEnv` (``fov-marl train --safety-filter
+    --workers W``)."""
+    from fov_marl.envs.subproc import build_raw_vector_env
+
+    venv = build_raw_vector_env(
+        num_envs, config=config, max_cycles=max_cycles, eta_method=eta_method
+    )
+    return VectorSafetyFilterWrapper(venv, **filter_kwargs)

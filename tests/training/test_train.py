@@ -165,6 +165,16 @@ def test_ppo_behind_the_safety_filter(tmp_path):
     acts, infos = _episode(policy, env, seed=0, steps=10)
     assert "safety" in infos["robot_0"]
     assert acts.shape == (10, 6, 3)
+    # the copies and their filters in 2 processes: the same run, parameter for parameter
+    path2 = _train(
+        tmp_path / "w2", timesteps=1000, safety_filter=True, checkpoint_every=0, workers=2
+    )
+    assert json.loads((tmp_path / "w2" / "config.json").read_text())["workers"] == 2
+    a = policy.model.policy.state_dict()
+    b = load_policy(path2).model.policy.state_dict()
+    assert a.keys() == b.keys()
+    for k in a:
+        assert torch.equal(a[k], b[k]), k
 
 
 def test_belief_policy_computes_the_wrapper_features_itself(tmp_path):
@@ -224,6 +234,8 @@ def test_invalid_arguments_raise_value_error(tmp_path):
         ({"env_kwargs": {"fov_deg": 0.0}}, "fov_deg"),
         ({"hyperparams": {"policy_kwargs": {"activation_fn": "swish"}}}, "activation_fn"),
         ({"train_max_cycles": 0}, "train_max_cycles"),
+        ({"workers": 3}, r"workers must be .*\[1, 2\]"),
+        ({"workers": 2, "belief": True}, "workers = 2 needs the vector env"),
     ):
         with pytest.raises(ValueError, match=match):
             _train(tmp_path, **kw)

@@ -533,3 +533,47 @@ def test_ppo_on_the_vector_adapter_equals_ppo_on_the_parallel_adapter():
     ).detach()
     assert not torch.equal(p0, p1)  # it did learn (the parameters moved)
     assert len(m1.ep_info_buffer) == len(m2.ep_info_buffer) > 0
+
+
+def test_training_vec_env_with_workers_equals_one_process_slot_by_slot():
+    """``workers=2`` (SubprocVectorEnv shards, behind the filter) gives the one-process
+    adapter's observations, rewards, dones and infos bit for bit, across auto-resets;
+    the per-copy path and ``workers > n_envs`` are refused."""
+    from fov_marl.envs import SubprocVectorEnv
+    from fov_marl.training.trainer import build_env, make_training_vec_env
+
+    cfg = {"n_agents": N, "max_cycles": 6}
+    sf = {"tracker_params": {"n_particles_total": 200}}
+
+    def factory():
+        return build_env("coverage", cfg, safety_filter=True, safety_filter_kwargs=sf)
+
+    one, _ = make_training_vec_env(3, factory, normalize=False)
+    two, _ = make_training_vec_env(3, factory, normalize=False, workers=2)
+    try:
+        assert isinstance(two.venv, SubprocVectorEnv) and two.venv.workers == 2
+        one.seed(4)
+        two.seed(4)
+        np.testing.assert_array_equal(one.reset(), two.reset())
+        rng = np.random.default_rng(0)
+        dones = 0
+        for _ in range(14):
+            act = _actions(rng, one, scale=1.0)
+            oa, ra, da, ia = one.step(act)
+            ob, rb, db, ib = two.step(act)
+            np.testing.assert_array_equal(oa, ob)
+            np.testing.assert_array_equal(ra, rb)
+            np.testing.assert_array_equal(da, db)
+            for x, y in zip(ia, ib, strict=True):
+                assert set(x) == set(y)
+                for k in x:
+                    np.testing.assert_array_equal(x[k], y[k], err_msg=k)
+            dones += int(da.sum())
+        assert dones >= 2 * one.num_envs
+        assert two.get_attr("max_cycles") == [6] * two.num_envs
+    finally:
+        two.close()
+    with pytest.raises(ValueError, match="workers"):
+        make_training_vec_env(2, factory, workers=3)
+    with pytest.raises(ValueError, match="per copy"):
+        make_training_vec_env(2, lambda: build_env("coverage", cfg, belief=True), workers=2)

@@ -1,0 +1,489 @@
+"""SubprocVectorEnv: the copies of a vector env split over worker processes.
+
+The batched core, the tracker bank and the batched controller are single-threaded
+NumPy: one process uses one core, however many copies it steps. ``SubprocVectorEnv``
+splits B copies into W contiguous shards, builds each shard's vector env in its own
+worker process and steps the shards in parallel (like Gymnasium's ``AsyncVectorEnv``
+and SB3's ``SubprocVecEnv``, but one process per *shard* of copies, not per copy)::
+
+    from functools import partial
+    from fov_marl.config import make_config
+    from fov_marl.envs import SubprocVectorEnv
+    from fov_marl.wrappers import build_filtered_vector_env
+
+    # each shard: a vector env behind the VectorSafetyFilterWrapper
+    make = partial(build_filtered_vector_env, config=make_config(n_agents=6))
+    venv = SubprocVectorEnv(make, num_envs=64, workers=2)
+    obs, infos = venv.reset(seed=0)           # obs (64, N, D)
+    obs, rew, term, trunc, infos = venv.step(actions)   # actions (64, N, 3)
+    venv.close()
+
+``fov_coverage_v0.vector_env(num_envs=B, workers=W)`` builds one for the raw env
+(shard factory :func:`build_raw_vector_env`);
+``fov-marl train --workers W`` for training (with or without ``--safety-filter``).
+
+Shards. Shard w holds copies ``[k_w, k_{w+1})`` (``np.array_split`` sizes: they differ
+by at most one); its vector env is ``make_vector(k_{w+1} − k_w)``. ``make_vector`` must be
+picklable (a module-level function, or ``functools.partial`` of one with picklable
+arguments): the workers are started with the ``forkserver`` method where the platform
+has it (``spawn`` elsewhere), never ``fork``, so a parent that holds threads (torch) is
+safe; as with every such start method, a script that creates one needs the
+``if __name__ == "__main__":`` guard (the workers import the main module).
+
+Same numbers as one process. ``reset(seed=s)`` resets shard w with ``s + k_w``, so copy
+k starts from ``s + k`` as in ``make_vector(B)``; a sequence of B seeds is sliced. Every
+computation of the env core, the tracker bank and the batched controller is per copy,
+so copy k's observations, rewards, metrics and (behind the filter) applied actions are
+bit-identical to those of ``make_vector(B)`` under the same actions (tested, raw and
+filtered, across an automatic reset).
+
+The vector API of :class:`~fov_marl.envs.vector.FovVectorEnv` (and of
+:class:`~fov_marl.wrappers.VectorSafetyFilterWrapper`): ``num_envs``, ``n_agents``,
+``config``, ``possible_agents``, ``single_observation_space``, ``single_action_space``,
+``observation_space``, ``action_space``, ``max_cycles`` (settable: set in every shard),
+``poses``, ``targets``, ``num_steps``, ``state()``, ``reset``, ``step`` (same-step
+autoreset; ``infos`` arrays are the shards' concatenated along the copy axis, and
+``infos["reset_metrics"]`` is present when any copy finished, holding
+``infos["metrics"]`` for the copies of shards where none did, as in one process) and
+``close``. ``last_cpu_s``: the filter's seconds in the last step summed over the
+shards (CPU time, not wall time), where the shards have it. :meth:`get_attr` and
+:meth:`call` reach any other attribute, one result per shard.
+
+Errors. Actions are checked here (shape, dtype, finite) with the messages of the
+vector env. A ``ValueError`` raised in a worker is raised again here with its message;
+any other exception becomes a ``RuntimeError`` carrying the worker's traceback. A worker
+that dies makes the next call raise ``RuntimeError``. Workers ignore SIGINT: Ctrl-C
+reaches the parent only, which can still close them (``fov-marl train`` saves its model
+on Ctrl-C). ``close()`` is idempotent; the env is a context manager.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import pickle
+import signal
+import traceback
+from collections.abc import Callable, Sequence
+from functools import partial
+from typing import Any
+
+import gymnasium
+import numpy as np
+
+from fov_marl.config import ScenarioConfig
+from fov_marl.envs.vector import FovVectorEnv, check_num_envs, check_vector_actions
+from fov_marl.validation import check_seed, describe
+
+__all__ = ["SubprocVectorEnv", "build_raw_vector_env", "make_vector_env"]
+
+#: Seconds ``close()`` waits for a worker to exit before terminating it.
+CLOSE_TIMEOUT_S = 10.0
+
+
+def build_raw_vector_env(
+    num_envs: int,
+    *,
+    config: ScenarioConfig,
+    max_cycles: int | None = None,
+    eta_method: str = "exact",
+) -> FovVectorEnv:
+    """``FovVectorEnv.from_config(config, num_envs, eta_method)`` with ``max_cycles`` set
+    (None: the config's); module-level, so ``functools.partial`` of it is a picklable
+    shard factory of :class:`SubprocVectorEnv`."""
+    venv = FovVectorEnv.from_config(config, num_envs, eta_method=eta_method)
+    if max_cycles is not None:
+        venv.max_cycles = int(max_cycles)
+    return venv
+
+
+def make_vector_env(
+    scenario: str,
+    name: str,
+    num_envs: int,
+    config_kwargs: dict[str, Any],
+    *,
+    workers: int = 1,
+    eta_method: str = "exact",
+) -> FovVectorEnv | SubprocVectorEnv:
+    """The ``vector_env`` of the scenario modules: one :class:`FovVectorEnv` for
+    ``workers = 1``, else a :class:`SubprocVectorEnv` of ``workers`` shards of it (the
+    config validated here, once, before any process starts)."""
+    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
+        raise ValueError(f"workers must be an integer in [1, num_envs], got {describe(workers)}")
+    if workers == 1:
+        return FovVectorEnv(num_envs, scenario, name, config_kwargs, eta_method=eta_method)
+    probe = FovVectorEnv(1, scenario, name, config_kwargs, eta_method=eta_method)
+    make = partial(build_raw_vector_env, config=probe.config, eta_method=eta_method)
+    return SubprocVectorEnv(make, check_num_envs(num_envs), int(workers))
+
+
+def _error(exc: BaseException) -> tuple[str, str, str]:
+    return type(exc).__name__, str(exc), traceback.format_exc()
+
+
+def _worker(conn: Any, make_vector: Callable[[int], Any], num_envs: int) -> None:
+    """A shard's process: build its vector env, then serve commands until ``close``."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        venv = make_vector(num_envs)
+        static = {
+            name: getattr(venv, name)
+            for name in (
+                "num_envs",
+                "n_agents",
+                "config",
+                "possible_agents",
+                "single_observation_space",
+                "single_action_space",
+                "max_cycles",
+                "metadata",
+            )
+        }
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent
+        conn.send(("error", _error(exc)))
+        conn.close()
+        return
+    conn.send(("ok", static))
+    while True:
+        try:
+            cmd, arg = conn.recv()
+        except (EOFError, OSError):  # the parent is gone
+            break
+        try:
+            if cmd == "step":
+                out: Any = (*venv.step(arg), getattr(venv, "last_cpu_s", None))
+            elif cmd == "reset":
+                out = venv.reset(seed=arg[0], options=arg[1])
+            elif cmd == "get":
+                out = getattr(venv, arg)
+            elif cmd == "call":
+                name, args, kwargs = arg
+                out = getattr(venv, name)(*args, **kwargs)
+            elif cmd == "set":
+                setattr(venv, arg[0], arg[1])
+                out = None
+            elif cmd == "close":
+                close = getattr(venv, "close", None)
+                if close is not None:
+                    close()
+                conn.send(("ok", None))
+                break
+            else:
+                raise ValueError(f"unknown command {cmd!r}")
+            conn.send(("ok", out))
+        except BaseException as exc:  # noqa: BLE001 - reported to the parent
+            conn.send(("error", _error(exc)))
+    conn.close()
+
+
+def _concat(parts: list[Any], key: str) -> Any:
+    """Concatenate the shards' values of one ``infos`` entry along the copy axis."""
+    if isinstance(parts[0], dict):
+        return {k: _concat([p[k] for p in parts], f"{key}/{k}") for k in parts[0]}
+    return np.concatenate([np.asarray(p) for p in parts], axis=0)
+
+
+def merge_vector_infos(parts: list[dict[str, Any]]) -> dict[str, Any]:
+    """One vector ``infos`` from the shards' (see the module docstring).
+
+    Every entry is a ``(B_w, ...)`` array or a dict of them; ``reset_metrics`` is filled
+    with ``metrics`` for shards that have none. Another entry missing from some shard
+    is an error (the shards' env types differ)."""
+    keys: list[str] = []
+    for p in parts:
+        keys.extend(k for k in p if k not in keys)
+    if any("reset_metrics" in p for p in parts):
+        parts = [p if "reset_metrics" in p else {**p, "reset_metrics": p["metrics"]} for p in parts]
+    out: dict[str, Any] = {}
+    for k in keys:
+        missing = [w for w, p in enumerate(parts) if k not in p]
+        if missing:
+            raise RuntimeError(f"infos[{k!r}] is missing from shard(s) {missing}")
+        out[k] = _concat([p[k] for p in parts], k)
+    return out
+
+
+class SubprocVectorEnv:
+    """B copies of a vector env split over W worker processes (see the module docstring).
+
+    Args:
+        make_vector: picklable ``make_vector(n) -> vector env of n copies``.
+        num_envs: B, an integer ≥ 1.
+        workers: W, an integer in [1, B].
+        start_method: ``"forkserver"`` or ``"spawn"`` (default: forkserver where
+            available). ``"fork"`` is refused (unsafe in a threaded parent).
+
+    Raises:
+        ValueError: bad ``num_envs``, ``workers`` or ``start_method``; ``make_vector`` not
+            picklable or not callable; a worker's ``ValueError`` while building its shard
+            (its message).
+        RuntimeError: a worker failed otherwise (with its traceback).
+    """
+
+    #: The vector env does not render (use a ParallelEnv for frames).
+    render_mode: str | None = None
+
+    def __init__(
+        self,
+        make_vector: Callable[[int], Any],
+        num_envs: int,
+        workers: int = 2,
+        *,
+        start_method: str | None = None,
+    ) -> None:
+        B = check_num_envs(num_envs)
+        if isinstance(workers, bool) or not isinstance(workers, int | np.integer):
+            raise ValueError(f"workers must be an integer in [1, {B}], got {describe(workers)}")
+        if not 1 <= workers <= B:
+            raise ValueError(f"workers must be an integer in [1, num_envs = {B}], got {workers}")
+        if not callable(make_vector):
+            raise ValueError(f"make_vector must be callable, got {describe(make_vector)}")
+        try:
+            pickle.dumps(make_vector)
+        except Exception as exc:  # noqa: BLE001 - any pickling failure
+            raise ValueError(
+                "make_vector must be picklable (a module-level function or a "
+                f"functools.partial of one): {exc}"
+            ) from None
+        methods = mp.get_all_start_methods()
+        if start_method is None:
+            start_method = "forkserver" if "forkserver" in methods else "spawn"
+        if start_method not in ("forkserver", "spawn") or start_method not in methods:
+            allowed = [m for m in ("forkserver", "spawn") if m in methods]
+            raise ValueError(f"start_method must be one of {allowed}, got {start_method!r}")
+        self._closed = True
+        self._conns: list[Any] = []
+        self._procs: list[Any] = []
+        self.num_envs = B
+        self.workers = int(workers)
+        sizes = [len(a) for a in np.array_split(np.arange(B), self.workers)]
+        self._starts = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        ctx = mp.get_context(start_method)
+        for n in sizes:
+            parent, child = ctx.Pipe()
+            proc = ctx.Process(target=_worker, args=(child, make_vector, n), daemon=True)
+            proc.start()
+            child.close()
+            self._conns.append(parent)
+            self._procs.append(proc)
+        self._closed = False
+        try:
+            statics = self._recv_all()
+        except BaseException:
+            self.close()
+            raise
+        s0 = statics[0]
+        for w, s in enumerate(statics):
+            if s["num_envs"] != sizes[w]:
+                self.close()
+                raise ValueError(
+                    f"make_vector({sizes[w]}) built a vector env of {s['num_envs']} copies"
+                )
+            if s["n_agents"] != s0["n_agents"] or s["config"] != s0["config"]:
+                self.close()
+                raise ValueError("make_vector built shards with different configs")
+        self.config: ScenarioConfig = s0["config"]
+        self.n_agents: int = int(s0["n_agents"])
+        self.possible_agents: list[str] = list(s0["possible_agents"])
+        self.single_observation_space = s0["single_observation_space"]
+        self.single_action_space = s0["single_action_space"]
+        self.metadata = dict(s0["metadata"])
+        self._max_cycles = int(s0["max_cycles"])
+        low = self.single_observation_space.low
+        high = self.single_observation_space.high
+        shape = (B, self.n_agents, *low.shape)
+        self.observation_space = gymnasium.spaces.Box(
+            np.broadcast_to(low, shape), np.broadcast_to(high, shape), dtype=np.float32
+        )
+        self.action_space = gymnasium.spaces.Box(-1.0, 1.0, (B, self.n_agents, 3), np.float32)
+        self.last_cpu_s: float | None = None
+        self._needs_reset = True
+
+    # ------------------------------------------------------------ plumbing
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ValueError("the SubprocVectorEnv is closed")
+
+    def _send(self, w: int, cmd: str, arg: Any = None) -> None:
+        try:
+            self._conns[w].send((cmd, arg))
+        except (BrokenPipeError, OSError):
+            raise RuntimeError(
+                f"worker {w} of the SubprocVectorEnv has exited "
+                f"(exit code {self._procs[w].exitcode})"
+            ) from None
+
+    def _recv_all(self) -> list[Any]:
+        """Every shard's answer, in order; the first error is raised after all answered."""
+        results: list[Any] = []
+        error: BaseException | None = None
+        for w, conn in enumerate(self._conns):
+            try:
+                status, payload = conn.recv()
+            except (EOFError, OSError):
+                self._procs[w].join(timeout=1.0)
+                error = error or RuntimeError(
+                    f"worker {w} of the SubprocVectorEnv has exited "
+                    f"(exit code {self._procs[w].exitcode}); a script that starts workers "
+                    "needs the 'if __name__ == \"__main__\":' guard"
+                )
+                results.append(None)
+                continue
+            if status == "error" and error is None:
+                name, msg, tb = payload
+                error = (
+                    ValueError(msg)
+                    if name == "ValueError"
+                    else RuntimeError(f"worker {w} raised {name}: {msg}\n{tb}")
+                )
+            results.append(payload)
+        if error is not None:
+            raise error
+        return results
+
+    def _all(self, cmd: str, arg: Any = None) -> list[Any]:
+        self._check_open()
+        for w in range(self.workers):
+            self._send(w, cmd, arg)
+        return self._recv_all()
+
+    # ------------------------------------------------------------- episode
+    def reset(
+        self, seed: int | Sequence[int] | None = None, options: dict | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset every copy (see the module docstring for the seeds)."""
+        self._check_open()
+        B = self.num_envs
+        st = self._starts
+        if seed is None or isinstance(seed, int | np.integer | bool):
+            s = check_seed("seed", seed)
+            shard_seeds: list[Any] = [None if s is None else s + int(k) for k in st[:-1]]
+        elif isinstance(seed, Sequence | np.ndarray) and not isinstance(seed, str | bytes):
+            seeds = list(seed)
+            if len(seeds) != B:
+                raise ValueError(
+                    f"seed must be None, an int or a sequence of num_envs = {B} seeds, "
+                    f"got a sequence of {len(seeds)}"
+                )
+            shard_seeds = [seeds[st[w] : st[w + 1]] for w in range(self.workers)]
+        else:
+            raise ValueError(f"seed must be None, an int or a sequence of ints, got {seed!r}")
+        for w in range(self.workers):
+            self._send(w, "reset", (shard_seeds[w], options))
+        parts = self._recv_all()
+        self._needs_reset = False
+        obs = np.concatenate([p[0] for p in parts], axis=0)
+        return obs, merge_vector_infos([p[1] for p in parts])
+
+    def step(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """One step of every copy in parallel (same-step autoreset; module docstring)."""
+        self._check_open()
+        if self._needs_reset:
+            raise ValueError("step() called before reset(); call reset() first")
+        act = check_vector_actions(actions, self.num_envs, self.n_agents)
+        st = self._starts
+        for w in range(self.workers):
+            self._send(w, "step", act[st[w] : st[w + 1]])
+        parts = self._recv_all()
+        obs, rew, term, trunc = (np.concatenate([p[i] for p in parts]) for i in range(4))
+        infos = merge_vector_infos([p[4] for p in parts])
+        cpu = [p[5] for p in parts]
+        self.last_cpu_s = None if any(c is None for c in cpu) else float(sum(cpu))
+        return obs, rew, term, trunc, infos
+
+    # ------------------------------------------------------------ attributes
+    @property
+    def max_cycles(self) -> int:
+        """Steps before truncation; setting it sets it in every shard."""
+        return self._max_cycles
+
+    @max_cycles.setter
+    def max_cycles(self, value: int) -> None:
+        self._all("set", ("max_cycles", value))
+        self._max_cycles = int(self.get_attr("max_cycles")[0])
+
+    def _gather(self, name: str) -> Any:
+        parts = self.get_attr(name)
+        if parts[0] is None:
+            return None
+        out = np.concatenate([np.asarray(p) for p in parts], axis=0)
+        out.setflags(write=False)
+        return out
+
+    @property
+    def poses(self) -> np.ndarray:
+        """``(B, N, 3)`` ground-truth world poses (read-only copy)."""
+        return self._gather("poses")
+
+    @property
+    def targets(self) -> np.ndarray | None:
+        """``(B, N, 2)`` crossing targets (read-only copy), else None."""
+        return self._gather("targets")
+
+    @property
+    def num_steps(self) -> np.ndarray:
+        """``(B,)`` steps taken in each copy's current episode."""
+        return np.concatenate(self.get_attr("num_steps"))
+
+    def state(self) -> np.ndarray:
+        """``(B, S)`` float32 global states."""
+        return np.concatenate(self.call("state"), axis=0)
+
+    def get_attr(self, name: str) -> list[Any]:
+        """Attribute ``name`` of every shard's vector env, one value per shard."""
+        if not isinstance(name, str):
+            raise ValueError(f"name must be a str, got {describe(name)}")
+        return self._all("get", name)
+
+    def call(self, name: str, *args: Any, **kwargs: Any) -> list[Any]:
+        """``shard_env.name(*args, **kwargs)`` in every shard, one result per shard."""
+        if not isinstance(name, str):
+            raise ValueError(f"name must be a str, got {describe(name)}")
+        return self._all("call", (name, args, kwargs))
+
+    @property
+    def unwrapped(self) -> SubprocVectorEnv:
+        return self
+
+    # --------------------------------------------------------------- close
+    def close(self) -> None:
+        """Stop the workers (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        for conn in self._conns:
+            try:
+                conn.send(("close", None))
+            except (BrokenPipeError, OSError):
+                pass
+        for conn, proc in zip(self._conns, self._procs, strict=True):
+            try:
+                if conn.poll(CLOSE_TIMEOUT_S):
+                    conn.recv()
+            except (EOFError, OSError):
+                pass
+            proc.join(timeout=CLOSE_TIMEOUT_S)
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(timeout=1.0)
+            conn.close()
+
+    def __enter__(self) -> SubprocVectorEnv:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - interpreter shutdown
+            pass
+
+    def __repr__(self) -> str:
+        return (
+            f"SubprocVectorEnv({self.metadata.get('name', '?')}, num_envs={self.num_envs}, "
+            f"n_agents={self.n_agents}, workers={self.workers})"
+        )

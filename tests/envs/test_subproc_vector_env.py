@@ -1,0 +1,203 @@
+"""SubprocVectorEnv: B copies over W worker processes give the one-process numbers."""
+
+from __future__ import annotations
+
+import functools
+import os
+import signal
+
+import numpy as np
+import pytest
+
+from fov_marl.config import make_config
+from fov_marl.envs import SubprocVectorEnv, build_raw_vector_env, fov_coverage_v0, fov_crossing_v0
+from fov_marl.envs.subproc import merge_vector_infos
+from fov_marl.wrappers import build_filtered_vector_env
+
+N = 4
+
+
+def _assert_same_step(a, b) -> None:
+    """Two ``step`` (or ``reset``) returns are bit-identical, infos entry by entry."""
+    assert len(a) == len(b)
+    for x, y in zip(a[:-1], b[:-1], strict=True):
+        np.testing.assert_array_equal(x, y)
+        assert np.asarray(x).dtype == np.asarray(y).dtype
+    _assert_same_infos(a[-1], b[-1])
+
+
+def _assert_same_infos(x, y) -> None:
+    assert set(x) == set(y)
+    for k in x:
+        if isinstance(x[k], dict):
+            _assert_same_infos(x[k], y[k])
+        else:
+            np.testing.assert_array_equal(x[k], y[k], err_msg=k)
+            assert np.asarray(x[k]).shape == np.asarray(y[k]).shape
+
+
+def _run_both(make, B: int, workers: int, steps: int, seed: int = 5) -> int:
+    """Step ``make(B)`` and its W-shard SubprocVectorEnv with the same random actions;
+    return how many copy-episodes ended (the auto-resets the comparison crossed)."""
+    one = make(B)
+    rng = np.random.default_rng(seed)
+    done = 0
+    with SubprocVectorEnv(make, B, workers) as sub:
+        _assert_same_step(one.reset(seed=seed), sub.reset(seed=seed))
+        for _ in range(steps):
+            act = rng.uniform(-1.2, 1.2, (B, one.n_agents, 3))
+            a, b = one.step(act), sub.step(act)
+            _assert_same_step(a, b)
+            done += int(a[4]["_final_obs"].sum())
+        np.testing.assert_array_equal(one.poses, sub.poses)
+        np.testing.assert_array_equal(one.num_steps, sub.num_steps)
+        np.testing.assert_array_equal(one.state(), sub.state())
+        if one.targets is None:
+            assert sub.targets is None
+        else:
+            np.testing.assert_array_equal(one.targets, sub.targets)
+        # an unseeded reset continues every copy's generator, in both
+        _assert_same_step(one.reset(), sub.reset())
+    return done
+
+
+@pytest.mark.parametrize(
+    ("scenario", "B", "workers"), [("coverage", 5, 2), ("crossing", 4, 3), ("coverage", 3, 3)]
+)
+def test_raw_shards_are_bit_identical_to_one_process_across_auto_resets(scenario, B, workers):
+    cfg = make_config(scenario=scenario, n_agents=N)
+    make = functools.partial(build_raw_vector_env, config=cfg, max_cycles=7)
+    assert _run_both(make, B, workers, steps=16) >= 2 * B  # every copy reset at least twice
+
+
+def test_filtered_shards_are_bit_identical_to_one_filter_over_all_copies():
+    """Behind the filter (tracker bank and batched controller per shard): the applied
+    actions, statuses and interventions equal one VectorSafetyFilterWrapper over all B
+    copies bit for bit, also after the trackers of finished copies restart."""
+    cfg = make_config(n_agents=N, arena_size_m=12.0, density_mean_m=(6.0, 6.0))
+    make = functools.partial(
+        build_filtered_vector_env,
+        config=cfg,
+        max_cycles=9,
+        tracker_params={"n_particles_total": 300},
+    )
+    one = make(3)
+    rng = np.random.default_rng(1)
+    changed = done = 0
+    with SubprocVectorEnv(make, 3, 2) as sub:
+        _assert_same_step(one.reset(seed=2), sub.reset(seed=2))
+        for _ in range(20):
+            act = rng.uniform(-1, 1, (3, N, 3))
+            a, b = one.step(act), sub.step(act)
+            _assert_same_step(a, b)
+            changed += int(a[4]["safety"]["intervened"].sum())
+            done += int(a[4]["_final_obs"].sum())
+        assert sub.last_cpu_s is not None and sub.last_cpu_s > 0
+    assert changed > 0 and done >= 6
+
+
+def test_vector_env_workers_keyword_and_seed_sequences():
+    """``vector_env(..., workers=W)`` of both scenarios; a sequence of B seeds is sliced
+    over the shards; ``max_cycles`` set on the parent reaches every shard."""
+    for mod in (fov_coverage_v0, fov_crossing_v0):
+        one = mod.vector_env(num_envs=3, n_agents=N)
+        sub = mod.vector_env(num_envs=3, n_agents=N, workers=2)
+        try:
+            assert isinstance(sub, SubprocVectorEnv) and sub.workers == 2
+            assert sub.config == one.config and sub.possible_agents == one.possible_agents
+            assert sub.observation_space == one.observation_space
+            assert sub.action_space == one.action_space
+            assert sub.single_observation_space == one.single_observation_space
+            _assert_same_step(one.reset(seed=[7, 9, 3]), sub.reset(seed=[7, 9, 3]))
+            # None continues that copy's generator, in its shard as in one process
+            _assert_same_step(one.reset(seed=[7, None, 3]), sub.reset(seed=[7, None, 3]))
+            sub.max_cycles = 2
+            one.max_cycles = 2
+            assert sub.get_attr("max_cycles") == [2, 2]
+            zero = np.zeros((3, N, 3))
+            sub.step(zero)
+            *_, infos = sub.step(zero)
+            assert infos["_final_obs"].all() and "reset_metrics" in infos
+        finally:
+            sub.close()
+    assert isinstance(fov_coverage_v0.vector_env(num_envs=2, workers=1), type(one))
+
+
+def test_merge_fills_reset_metrics_of_shards_without_a_finished_copy():
+    a = {"metrics": {"eta": np.array([0.1])}, "_final_obs": np.array([False])}
+    b = {
+        "metrics": {"eta": np.array([0.2, 0.3])},
+        "_final_obs": np.array([True, False]),
+        "reset_metrics": {"eta": np.array([0.0, 0.3])},
+    }
+    m = merge_vector_infos([a, b])
+    np.testing.assert_array_equal(m["reset_metrics"]["eta"], [0.1, 0.0, 0.3])
+    np.testing.assert_array_equal(m["metrics"]["eta"], [0.1, 0.2, 0.3])
+    with pytest.raises(RuntimeError, match="safety"):
+        merge_vector_infos([a, {**b, "safety": {"x": np.zeros(2)}}])
+
+
+def _raise_value_error(n: int):
+    raise ValueError(f"bad shard of {n} copies")
+
+
+def _raise_key_error(n: int):
+    raise KeyError("boom")
+
+
+def _wrong_size(n: int):
+    return build_raw_vector_env(n + 1, config=make_config(n_agents=N))
+
+
+def test_bad_arguments_and_worker_failures_raise_clear_errors():
+    make = functools.partial(build_raw_vector_env, config=make_config(n_agents=N))
+    for workers in (0, 4, True, 1.5, None):
+        with pytest.raises(ValueError, match="workers"):
+            SubprocVectorEnv(make, 3, workers)
+    with pytest.raises(ValueError, match="num_envs"):
+        SubprocVectorEnv(make, 0, 1)
+    with pytest.raises(ValueError, match="picklable"):
+        SubprocVectorEnv(lambda n: make(n), 2, 2)
+    with pytest.raises(ValueError, match="callable"):
+        SubprocVectorEnv(3, 2, 2)
+    with pytest.raises(ValueError, match="start_method"):
+        SubprocVectorEnv(make, 2, 2, start_method="fork")
+    with pytest.raises(ValueError, match="bad shard of 1 copies"):
+        SubprocVectorEnv(_raise_value_error, 2, 2)
+    with pytest.raises(RuntimeError, match="KeyError"):
+        SubprocVectorEnv(_raise_key_error, 2, 2)
+    with pytest.raises(ValueError, match="copies"):
+        SubprocVectorEnv(_wrong_size, 2, 2)
+    with pytest.raises(ValueError, match="workers"):
+        fov_coverage_v0.vector_env(num_envs=2, workers=0)
+
+    sub = SubprocVectorEnv(make, 3, 2)
+    try:
+        with pytest.raises(ValueError, match="before reset"):
+            sub.step(np.zeros((3, N, 3)))
+        sub.reset(seed=0)
+        with pytest.raises(ValueError, match=r"shape \(num_envs, n_agents, 3\)"):
+            sub.step(np.zeros((2, N, 3)))
+        bad = np.zeros((3, N, 3))
+        bad[2, 1, 0] = np.nan
+        with pytest.raises(ValueError, match=r"actions\[2, 1\]"):
+            sub.step(bad)
+        with pytest.raises(ValueError, match="sequence of num_envs = 3"):
+            sub.reset(seed=[1, 2])
+        with pytest.raises(ValueError, match="seed"):
+            sub.reset(seed=-1)
+        # an error inside a worker: raised here, and the shard keeps serving
+        with pytest.raises(RuntimeError, match="AttributeError"):
+            sub.call("no_such_method")
+        sub.step(np.zeros((3, N, 3)))
+        # a worker that dies: the next call says so
+        os.kill(sub._procs[1].pid, signal.SIGKILL)
+        sub._procs[1].join(timeout=10)
+        with pytest.raises(RuntimeError, match="worker 1"):
+            sub.step(np.zeros((3, N, 3)))
+    finally:
+        sub.close()
+    sub.close()  # idempotent
+    with pytest.raises(ValueError, match="closed"):
+        sub.reset(seed=0)
+    assert all(not p.is_alive() for p in sub._procs)
