@@ -177,6 +177,34 @@ def test_bench_json_reports_every_layer(capsys):
     assert env6 and env6[0]["agent_steps_per_s"] > 0
 
 
+def test_issue12_summary_reads_the_ppo_rows_per_worker_count():
+    """The PPO acceptance rows of ``fov-marl bench --ppo``: one per (filter, P_T, B,
+    workers), the goal checked against the issue's figures."""
+    from fov_marl.bench import issue12_summary
+
+    def ppo(filt, workers, rate):
+        return {
+            "section": "ppo",
+            "adapter": "vector",
+            "n_envs": 64,
+            "workers": workers,
+            "safety_filter": filt,
+            "n_particles_total": 2000 if filt else None,
+            "samples_per_s": rate,
+            "ratio": None,
+            "load_1min": 0.5,
+        }
+
+    rows = [ppo(True, 1, 2410.0), ppo(True, 2, 3812.0), ppo(False, 2, 12000.0)]
+    summary = {r["figure"]: r for r in issue12_summary(rows)}
+    one = summary["PPO samples/s, filter P_T=2000, B=64, workers=1"]
+    two = summary["PPO samples/s, filter P_T=2000, B=64, workers=2"]
+    assert not one["met"] and two["met"] and two["goal"] == ">= 3000"
+    assert two["vs_issue_today"] == pytest.approx(3812.0 / 1079.0)
+    free = summary["PPO samples/s, no filter, B=64, workers=2"]
+    assert free["met"] is False  # 12,000 < 2 x 6,087
+
+
 def test_evaluate_pfcbf_with_safety_filter_flag(tmp_path):
     args = _eval_args(tmp_path, policy="pfcbf", extra=("--safety-filter",))
     assert main(args) == 0
