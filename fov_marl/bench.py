@@ -8,7 +8,8 @@ in the same run, and the ratio; optionally ``vmas``, VMAS simple_spread on CPU w
 (the full pfcbf policy step: tracker + Lloyd + cascade + final QP) and
 ``vector_filter`` (the safety filter and pfcbf over B copies, one pipeline per copy
 against one batched pipeline, :func:`bench_batched_filter`; also at the reduced
-particle budget :data:`FAST_FILTER_PARTICLES`), ``issue12`` (the acceptance figures of
+particle budget :data:`FAST_FILTER_PARTICLES`), ``filtered_step`` (env + filter over
+B = 64 copies in 1 and 2 processes, :func:`bench_filtered_step`), ``issue12`` (the acceptance figures of
 the batched core side by side, from the rows of the same run: env ratio at N = 6,
 B = 64; filter ms per robot-step at B N = 384; PPO samples/s when measured),
 ``issue10`` (pfcbf's budget, ≤ 1 ms per robot-step at N = 6-48, from the ``controller``
@@ -34,6 +35,7 @@ __all__ = [
     "bench_vector_env",
     "bench_batched_filter",
     "bench_ppo",
+    "bench_filtered_step",
     "bench_vmas",
     "bench_controller",
     "issue10_summary",
@@ -469,6 +471,73 @@ def bench_batched_filter(
     return out
 
 
+def bench_filtered_step(
+    num_envs: int = 64,
+    n_agents: int = 6,
+    workers: Sequence[int] = (1, 2),
+    filter_particles: Sequence[int | None] = (None, FAST_FILTER_PARTICLES),
+    steps: int = 20,
+    warmup: int = 5,
+    seed: int = 0,
+) -> list[dict[str, Any]]:
+    """Wall time of a whole filtered step (env + :class:`~fov_marl.wrappers.
+    VectorSafetyFilterWrapper`, uniform random actions) over B copies, in one process and
+    split over W worker processes (:class:`~fov_marl.envs.SubprocVectorEnv`), one run.
+
+    What a trainer waits for per step. Unlike :func:`bench_batched_filter` this includes
+    the env step and cannot separate the filter's stages (they run in the workers).
+
+    Returns:
+        One dict per (P_T, W): ``section`` ``"filtered_step"``, ``num_envs``,
+        ``n_agents``, ``robots`` (B N), ``workers``, ``n_particles_total``,
+        ``wall_ms_per_robot_step`` (median step / B N), ``speedup`` (over W = 1 of the same
+        P_T, None when W = 1 was not run), ``load_1min``.
+    """
+    from functools import partial
+
+    from fov_marl.config import make_config
+    from fov_marl.envs import SubprocVectorEnv
+    from fov_marl.wrappers import build_filtered_vector_env
+
+    cfg = make_config(n_agents=n_agents)
+    rng = np.random.default_rng(seed)
+    rows: list[dict[str, Any]] = []
+    for p_t in filter_particles:
+        tp = {"n_particles_total": int(p_t)} if p_t else None
+        make = partial(build_filtered_vector_env, config=cfg, tracker_params=tp)
+        base = None
+        for w in workers:
+            venv = make(num_envs) if int(w) == 1 else SubprocVectorEnv(make, num_envs, int(w))
+            try:
+                venv.reset(seed=seed)
+                times = []
+                for k in range(warmup + steps):
+                    act = rng.uniform(-1.0, 1.0, (num_envs, n_agents, 3))
+                    t0 = time.perf_counter()
+                    venv.step(act)
+                    if k >= warmup:
+                        times.append(time.perf_counter() - t0)
+            finally:
+                venv.close()
+            ms = 1e3 * float(np.median(times)) / (num_envs * n_agents)
+            if int(w) == 1:
+                base = ms
+            rows.append(
+                {
+                    "section": "filtered_step",
+                    "num_envs": int(num_envs),
+                    "n_agents": int(n_agents),
+                    "robots": int(num_envs * n_agents),
+                    "workers": int(w),
+                    "n_particles_total": int(p_t) if p_t else 2000,
+                    "wall_ms_per_robot_step": ms,
+                    "speedup": base / ms if base else None,
+                    "load_1min": _load(),
+                }
+            )
+    return rows
+
+
 def bench_ppo(
     n_envs: Sequence[int] = (4, 16, 64),
     safety_filter: Sequence[bool] = (False, True),
@@ -642,6 +711,18 @@ def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                 load_1min=r.get("load_1min"),
             )
     for r in rows:
+        if r["section"] == "filtered_step" and r["robots"] >= 384:
+            # the whole filtered step (env + filter) in wall time, W processes: what a
+            # trainer waits for; the CPU time per robot-step is not reduced by W
+            add(
+                f"filtered env step wall ms/robot-step, B*N={r['robots']}, "
+                f"P_T={r['n_particles_total']}, workers={r['workers']}",
+                r["wall_ms_per_robot_step"],
+                "<= 0.1 ms (filter alone, one process, in the issue)",
+                r["wall_ms_per_robot_step"] <= 0.1,
+                load_1min=r.get("load_1min"),
+            )
+    for r in rows:
         if r["section"] == "ppo" and r["adapter"] == "vector":
             if r["safety_filter"]:
                 today, goal = ISSUE12_PPO_TODAY["filter"], 3000.0
@@ -687,6 +768,8 @@ def run_benchmarks(
             policy=policy,
         ):
             rows.append({"section": "vector_filter", "policy": policy, **r})
+    # the whole filtered step over 1 and 2 processes (SubprocVectorEnv), B N = 384
+    rows.extend(bench_filtered_step(steps=5 if quick else 20, warmup=1 if quick else 5))
     # the filter at the reduced particle budget, at B N = 384 (the issue's figure)
     for r in bench_batched_filter(
         n_copies=(64,),

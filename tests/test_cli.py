@@ -140,6 +140,7 @@ def test_bench_json_reports_every_layer(capsys):
         "env",
         "vector_env",
         "vector_filter",
+        "filtered_step",
         "tracker",
         "control",
         "controller",
@@ -149,6 +150,7 @@ def test_bench_json_reports_every_layer(capsys):
         "env",
         "vector_env",
         "vector_filter",
+        "filtered_step",
         "vmas",
         "tracker",
         "control",
@@ -162,6 +164,16 @@ def test_bench_json_reports_every_layer(capsys):
     figures = " | ".join(r["figure"] for r in summary)
     assert "N=6 B=64, eta exact" in figures and "P_T=2000" in figures and "P_T=500" in figures
     assert all(r["load_1min"] is not None for r in summary)
+    # the whole filtered step in 1 and 2 processes, at both particle budgets
+    steps = [r for r in rows if r["section"] == "filtered_step"]
+    assert {(r["workers"], r["n_particles_total"]) for r in steps} == {
+        (1, 2000),
+        (2, 2000),
+        (1, 500),
+        (2, 500),
+    }
+    assert all(r["wall_ms_per_robot_step"] > 0 and r["robots"] == 384 for r in steps)
+    assert "P_T=2000, workers=2" in figures
     ctrl = [r for r in rows if r["section"] == "controller"]
     assert ctrl[0]["n_agents"] == 6 and ctrl[0]["ms_per_robot_step"] > 0
     assert {"tracker_ms", "lloyd_ms", "qp_ms"} <= set(ctrl[0])
