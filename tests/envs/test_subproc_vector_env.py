@@ -70,10 +70,36 @@ def test_raw_shards_are_bit_identical_to_one_process_across_auto_resets(scenario
     assert _run_both(make, B, workers, steps=16) >= 2 * B  # every copy reset at least twice
 
 
-def test_filtered_shards_are_bit_identical_to_one_filter_over_all_copies():
+def _assert_close_step(a, b) -> None:
+    """Behind the filter: observations, rewards and metrics within round-off, applied
+    actions within 1e-12, flags, statuses and dones exactly (SubprocVectorEnv
+    docstring: the batched controller rounds by its batch's composition)."""
+    for x, y in zip(a[:-1], b[:-1], strict=True):
+        if np.asarray(x).dtype == bool:
+            np.testing.assert_array_equal(x, y)
+        else:
+            np.testing.assert_allclose(x, y, rtol=0, atol=1e-9)
+    ia, ib = a[-1], b[-1]
+    assert set(ia) == set(ib)
+    for k in ia:
+        if k == "safety":
+            sa, sb = ia[k], ib[k]
+            np.testing.assert_allclose(sa["applied_action"], sb["applied_action"], atol=1e-12)
+            np.testing.assert_array_equal(sa["nominal_action"], sb["nominal_action"])
+            for f in ("intervened", "status", "fallback"):
+                np.testing.assert_array_equal(sa[f], sb[f], err_msg=f)
+        elif isinstance(ia[k], dict):
+            for m in ia[k]:
+                np.testing.assert_allclose(ia[k][m], ib[k][m], rtol=0, atol=1e-9, err_msg=m)
+        else:
+            np.testing.assert_allclose(ia[k], ib[k], rtol=0, atol=1e-9, err_msg=k)
+
+
+def test_filtered_shards_equal_one_filter_over_all_copies_to_round_off():
     """Behind the filter (tracker bank and batched controller per shard): the applied
     actions, statuses and interventions equal one VectorSafetyFilterWrapper over all B
-    copies bit for bit, also after the trackers of finished copies restart."""
+    copies to round-off, also after the trackers of finished copies restart; a seed
+    sequence reaches the filters as in one process."""
     cfg = make_config(n_agents=N, arena_size_m=12.0, density_mean_m=(6.0, 6.0))
     make = functools.partial(
         build_filtered_vector_env,
@@ -85,15 +111,23 @@ def test_filtered_shards_are_bit_identical_to_one_filter_over_all_copies():
     rng = np.random.default_rng(1)
     changed = done = 0
     with SubprocVectorEnv(make, 3, 2) as sub:
-        _assert_same_step(one.reset(seed=2), sub.reset(seed=2))
-        for _ in range(20):
-            act = rng.uniform(-1, 1, (3, N, 3))
-            a, b = one.step(act), sub.step(act)
-            _assert_same_step(a, b)
-            changed += int(a[4]["safety"]["intervened"].sum())
-            done += int(a[4]["_final_obs"].sum())
+        for seed in (2, [5, None, 9]):
+            _assert_same_step(one.reset(seed=seed), sub.reset(seed=seed))
+            for _ in range(20):
+                act = rng.uniform(-1, 1, (3, N, 3))
+                a, b = one.step(act), sub.step(act)
+                _assert_close_step(a, b)
+                changed += int(a[4]["safety"]["intervened"].sum())
+                done += int(a[4]["_final_obs"].sum())
         assert sub.last_cpu_s is not None and sub.last_cpu_s > 0
-    assert changed > 0 and done >= 6
+        # max_cycles set on the filtered shards reaches their envs
+        sub.max_cycles = 2
+        assert sub.get_attr("max_cycles") == [2, 2]
+        sub.reset(seed=0)
+        sub.step(np.zeros((3, N, 3)))
+        *_, infos = sub.step(np.zeros((3, N, 3)))
+        assert infos["_final_obs"].all()
+    assert changed > 0 and done >= 12
 
 
 def test_vector_env_workers_keyword_and_seed_sequences():
@@ -149,6 +183,29 @@ def _wrong_size(n: int):
     return build_raw_vector_env(n + 1, config=make_config(n_agents=N))
 
 
+def test_copies_pickles_and_interrupted_calls_leave_the_env_working():
+    """Copying or pickling raises (a copy would close the original's pipes when
+    collected); an answer left unread (a Ctrl-C while waiting) is not read by the next
+    call."""
+    import copy
+    import pickle
+
+    make = functools.partial(build_raw_vector_env, config=make_config(n_agents=N))
+    one = make(3)
+    with SubprocVectorEnv(make, 3, 2) as sub:
+        for fn in (copy.copy, copy.deepcopy, pickle.dumps):
+            with pytest.raises(TypeError, match="SubprocVectorEnv cannot be"):
+                fn(sub)
+        _assert_same_step(one.reset(seed=1), sub.reset(seed=1))
+        act = np.zeros((3, N, 3))
+        for w in range(sub.workers):  # what a step interrupted before its answers leaves
+            sub._send(w, "step", act[sub._starts[w] : sub._starts[w + 1]])
+        one.step(act)
+        np.testing.assert_array_equal(sub.num_steps, one.num_steps)  # not the stale step
+        np.testing.assert_array_equal(sub.poses, one.poses)
+        _assert_same_step(one.step(act), sub.step(act))
+
+
 def test_bad_arguments_and_worker_failures_raise_clear_errors():
     make = functools.partial(build_raw_vector_env, config=make_config(n_agents=N))
     for workers in (0, 4, True, 1.5, None):
@@ -168,6 +225,14 @@ def test_bad_arguments_and_worker_failures_raise_clear_errors():
         SubprocVectorEnv(_raise_key_error, 2, 2)
     with pytest.raises(ValueError, match="copies"):
         SubprocVectorEnv(_wrong_size, 2, 2)
+    # a ConfigError (a ValueError) in a worker comes back as ValueError, with its message
+    bad_filter = functools.partial(
+        build_filtered_vector_env,
+        config=make_config(n_agents=N),
+        tracker_params={"n_particles_total": 0},
+    )
+    with pytest.raises(ValueError, match="n_particles_total"):
+        SubprocVectorEnv(bad_filter, 2, 2)
     with pytest.raises(ValueError, match="workers"):
         fov_coverage_v0.vector_env(num_envs=2, workers=0)
 
@@ -186,6 +251,11 @@ def test_bad_arguments_and_worker_failures_raise_clear_errors():
             sub.reset(seed=[1, 2])
         with pytest.raises(ValueError, match="seed"):
             sub.reset(seed=-1)
+        # a bad entry is named by its copy, before any shard resets
+        steps_before = sub.num_steps
+        with pytest.raises(ValueError, match=r"seed\[2\]"):
+            sub.reset(seed=[0, 1, -1])
+        np.testing.assert_array_equal(sub.num_steps, steps_before)
         # an error inside a worker: raised here, and the shard keeps serving
         with pytest.raises(RuntimeError, match="AttributeError"):
             sub.call("no_such_method")
