@@ -544,6 +544,12 @@ SPECS: dict[str, dict[str, dict]] = {
         },
         "--checkpoint-every": {"bad": ["-1", "abc", "", "1.5", "nan"], "good": ["0", "4"]},
         "--torch-threads": {"bad": [*BAD_POSITIVE_INT, "1025"], "good": ["1", "2"]},
+        # the base line has --n-envs 1: 2 workers is more than copies (a one-line error)
+        "--workers": {
+            "bad": [*BAD_POSITIVE_INT, "1025", "2"],
+            "good": ["1"],
+            "names": ("--workers", "workers must"),  # train()'s check names the field
+        },
         "--arch": {"bad": ["cnn", "", "SET"], "good": ["mlp", "set"]},
         "--ctde": {"bad": ["--ctde=1", None], "good": [], "either": [None]},
         "--eta-level-coef": {"bad": BAD_COEF, "good": ["0", "1"]},
