@@ -69,19 +69,50 @@ def batch_project_to_admissible(
     return out.reshape(u.shape)
 
 
+def rows_dot(x: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """``x @ M.T`` for ``x (R, n)`` and ``M (m, n)`` (or ``x @ w`` for a vector ``w (n,)``),
+    computed as ``Σ_c x[:, c] M[:, c]`` in a fixed order: the result of row r does not
+    depend on R. BLAS (what ``@`` calls for larger R) picks kernels by the matrix's size
+    and rounds row r differently in a batch of 48 than in one of 24 (measured: 1e-16 in
+    the batched controller's actions), which made a copy's actions depend on which copies
+    shared its batch (:class:`~fov_marl.envs.SubprocVectorEnv`)."""
+    x = np.asarray(x, dtype=np.float64)
+    M = np.asarray(M, dtype=np.float64)
+    if M.ndim == 1:
+        out = x[:, 0] * M[0]
+        for c in range(1, M.shape[0]):
+            out = out + x[:, c] * M[c]
+        return out
+    out = x[:, 0:1] * M[None, :, 0]
+    for c in range(1, M.shape[1]):
+        out = out + x[:, c : c + 1] * M[None, :, c]
+    return out
+
+
 def batch_least_distance(
-    G: np.ndarray, h: np.ndarray, mask: np.ndarray | None = None, max_iter: int | None = None
+    G: np.ndarray,
+    h: np.ndarray,
+    mask: np.ndarray | None = None,
+    max_iter: int | None = None,
+    var_mask: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``min ‖y‖² s.t. G y ≥ h`` for ``R`` problems (module docstring).
 
     Each problem is reduced to NNLS exactly as :func:`~fov_marl.control.qp.least_distance`
     (Lawson & Hanson, ch. 23) and solved by SciPy's compiled NNLS, one call per problem:
     the stacked ``E = [Gᵀ; hᵀ]`` of all problems is built at once, the loop only slices
-    and calls. The result of problem ``r`` does not depend on the other problems.
+    and calls. The result of problem ``r`` does not depend on the other problems: each is
+    sliced to its own rows (``mask``) and variables (``var_mask``) before the call, so
+    the padding a batch needs for its largest problem never enters another problem's
+    arithmetic (SciPy's NNLS and the ``E z`` product round differently with extra zero
+    rows).
 
     Args:
         G: ``(R, m, n)`` constraint normals; h: ``(R, m)``.
         mask: ``(R, m)`` bool, rows that exist (default all).
+        var_mask: ``(R, n)`` bool, variables that exist (default all); a missing
+            variable must have zero coefficients in every existing row, and is 0 in
+            ``y``.
         max_iter: NNLS iteration cap per problem (default ``20 (m_r + n + 1)``, as
             :func:`~fov_marl.control.qp.least_distance`).
 
@@ -107,14 +138,25 @@ def batch_least_distance(
     mask = np.asarray(mask, dtype=bool)
     finite = np.isfinite(np.where(mask[:, None, :], E, 0.0)).all(axis=(1, 2))
     full = mask.all(axis=1)
+    if var_mask is not None:
+        var_mask = np.asarray(var_mask, dtype=bool)
+        all_vars = var_mask.all(axis=1)
+        keep_h = np.ones((R, 1), dtype=bool)
+        e_rows = np.concatenate([var_mask, keep_h], axis=1)
     for r in np.flatnonzero(finite).tolist():
-        Er = E[r] if full[r] else np.ascontiguousarray(E[r][:, mask[r]])
+        Er = E[r] if full[r] else E[r][:, mask[r]]
+        if var_mask is not None and not all_vars[r]:
+            Er = Er[e_rows[r]]
+        Er = np.ascontiguousarray(Er)
         if Er.shape[1] == 0:
             ok[r] = True
             continue
         s = _ldp(Er, max_iter)
         if s is not None:
-            y[r] = s
+            if var_mask is not None and not all_vars[r]:
+                y[r, var_mask[r]] = s
+            else:
+                y[r] = s
             ok[r] = True
     return y, ok
 
@@ -227,7 +269,7 @@ class BatchHierarchicalQP:
         hh = np.concatenate(
             [
                 lo - np.einsum("rkn,rn->rk", A, u_star),
-                self._h_adm[None, :] - u_star @ self._G_adm.T,
+                self._h_adm[None, :] - rows_dot(u_star, self._G_adm),
             ],
             axis=1,
         )
@@ -258,10 +300,12 @@ class BatchHierarchicalQP:
         hh = np.empty((R, m))
         hh[:, :nc] = -b_l - np.einsum("rkn,rn->rk", A_l, u_star)
         hh[:, nc : nc + K] = lo_fix - np.einsum("rkn,rn->rk", A, u_star)
-        hh[:, nc + K :] = self._h_adm[None, :] - u_star @ self._G_adm.T
-        # rows of robots with fewer level rows are masked out; their κ variables stay 0
+        hh[:, nc + K :] = self._h_adm[None, :] - rows_dot(u_star, self._G_adm)
+        # rows of robots with fewer level rows are masked out, and so are their κ
+        # variables: each robot's program is its own, whatever the batch's largest
         mask = np.concatenate([lmask, fixmask, np.ones((R, na), dtype=bool)], axis=1)
-        y, ok = batch_least_distance(G, hh, mask)
+        var_mask = np.concatenate([np.ones((R, 3), dtype=bool), lmask], axis=1)
+        y, ok = batch_least_distance(G, hh, mask, var_mask=var_mask)
         return u_star + y[:, :3] * sc, ok
 
     # ------------------------------------------------------------------ solve

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fov_marl.config import ScenarioConfig
-from fov_marl.control.batch_qp import _BIG_LEVEL, STATUS_CODES, BatchHierarchicalQP
+from fov_marl.control.batch_qp import _BIG_LEVEL, STATUS_CODES, BatchHierarchicalQP, rows_dot
 from fov_marl.control.cbf import (
     SAFETY_ROW,
     cbf_rows,
@@ -437,7 +437,7 @@ class BatchedFovCbfController:
         n_s = skeep.sum(axis=1)
         cone_ok = np.ones(R, dtype=bool)
         if n_cone:
-            cone_ok = (u_proj @ self._cone_A.T + self._cone_b).min(axis=1) >= 0.0
+            cone_ok = (rows_dot(u_proj, self._cone_A) + self._cone_b).min(axis=1) >= 0.0
         unc = ~active.any(axis=(1, 2)) & (n_s == 0) & cone_ok
         level_all = self.assign_levels(
             active, d, ids, np.hypot(p_body[..., 0], p_body[..., 1]), priority_bonus
@@ -633,7 +633,7 @@ class BatchedFovCbfController:
             return yielded
         wt = np.array([1.0, 1.0, self._w * self._w])
         c_i = np.flatnonzero(cand)
-        cost_cur = ((u[c_i] - usq[c_i]) ** 2) @ wt
+        cost_cur = rows_dot((u[c_i] - usq[c_i]) ** 2, wt)
         # the per-robot bound: the re-solve keeps every level above the first lost row's,
         # so it costs at least the candidate that reached that level (the hierarchy for
         # u*, before "keep right": _adopt leaves these fields as they were)
@@ -647,7 +647,7 @@ class BatchedFovCbfController:
             return yielded
         c_i, cost_cur = c_i[~skip], cost_cur[~skip]
         alt = self._qp_solve(Aq[c_i], bq[c_i], lv[c_i], actq[c_i] & ~lost[c_i], usq[c_i])
-        cost_alt = ((alt.u - usq[c_i]) ** 2) @ wt
+        cost_alt = rows_dot((alt.u - usq[c_i]) ** 2, wt)
         use = ~alt.fallback & (cost_alt <= 0.5 * cost_cur)
         if not use.any():
             return yielded

@@ -173,7 +173,7 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         type=_int_in("--workers", 1, 1024),
         default=1,
         help="processes stepping the env copies and the safety filter, in [1, --n-envs] "
-        "(one core each; the same numbers, up to round-off behind the filter; not with --belief)",
+        "(one core each; the same numbers; not with --belief)",
     )
     parser.add_argument(
         "--n-agents",

@@ -274,8 +274,7 @@ def make_training_vec_env(
     set policy's :class:`~fov_marl.training.set_policy.CtdeVecEnvWrapper`);
     ``norm_obs=False`` keeps ``VecNormalize`` to the rewards. ``workers = W > 1`` (vector
     paths only, ``W <= n_envs``) steps the copies in W processes
-    (:class:`~fov_marl.envs.SubprocVectorEnv`: W cores; the same numbers, up to round-off
-    behind the filter); the per-copy
+    (:class:`~fov_marl.envs.SubprocVectorEnv`: W cores, the same numbers); the per-copy
     path refuses it.
     """
     from fov_marl.envs.fov_coverage_v0 import FovCoverageEnv
@@ -778,8 +777,7 @@ def train(
             anything runs.
         n_envs: env copies, in [1, 1024].
         workers: processes stepping the env copies (and the filter), in [1, n_envs]
-            (:class:`~fov_marl.envs.SubprocVectorEnv`; the numbers of 1, up to round-off
-            behind the filter). Needs the
+            (:class:`~fov_marl.envs.SubprocVectorEnv`; the same numbers as 1). Needs the
             vector path: not with ``belief``.
         env_kwargs: scenario config fields (:class:`fov_marl.config.ScenarioConfig`).
         hyperparams: SB3 keyword overrides; ``policy_kwargs`` is merged with the default,

@@ -32,7 +32,7 @@ the 95% ellipse for a robot driving straight). A smaller budget is a choice of t
 user's; the default stays 2000. The filter is single-threaded NumPy: to use more cores,
 split the copies over processes with :class:`~fov_marl.envs.SubprocVectorEnv` and
 :func:`build_filtered_vector_env` (``fov-marl train --safety-filter --workers W``; the
-same numbers up to round-off, see its docstring). PPO behind the filter at B = 64 on the 2-core machine: 2,410 samples/s
+same numbers). PPO behind the filter at B = 64 on the 2-core machine: 2,410 samples/s
 in one process, 3,812 with 2 workers (CHANGELOG).
 """
 

@@ -537,8 +537,7 @@ def test_ppo_on_the_vector_adapter_equals_ppo_on_the_parallel_adapter():
 
 def test_training_vec_env_with_workers_equals_one_process_slot_by_slot():
     """``workers=2`` (SubprocVectorEnv shards, behind the filter) gives the one-process
-    adapter's observations, rewards, dones and infos (to round-off: SubprocVectorEnv's
-    docstring), across auto-resets; ``set_attr("max_cycles")`` reaches the envs behind
+    adapter's observations, rewards, dones and infos bit for bit, across auto-resets; ``set_attr("max_cycles")`` reaches the envs behind
     the filter; the per-copy path and ``workers > n_envs`` are refused."""
     from fov_marl.envs import SubprocVectorEnv
     from fov_marl.training.trainer import build_env, make_training_vec_env
@@ -562,16 +561,13 @@ def test_training_vec_env_with_workers_equals_one_process_slot_by_slot():
             act = _actions(rng, one, scale=1.0)
             oa, ra, da, ia = one.step(act)
             ob, rb, db, ib = two.step(act)
-            np.testing.assert_allclose(oa, ob, rtol=0, atol=1e-9)
-            np.testing.assert_allclose(ra, rb, rtol=0, atol=1e-9)
+            np.testing.assert_array_equal(oa, ob)
+            np.testing.assert_array_equal(ra, rb)
             np.testing.assert_array_equal(da, db)
             for x, y in zip(ia, ib, strict=True):
                 assert set(x) == set(y)
                 for k in x:
-                    if isinstance(x[k], str | bool | int):
-                        assert x[k] == y[k], k
-                    else:
-                        np.testing.assert_allclose(x[k], y[k], rtol=0, atol=1e-9, err_msg=k)
+                    np.testing.assert_array_equal(x[k], y[k], err_msg=k)
             dones += int(da.sum())
         assert dones >= 2 * one.num_envs
         assert two.get_attr("max_cycles") == [6] * two.num_envs
