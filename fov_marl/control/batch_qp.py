@@ -79,10 +79,7 @@ def rows_dot(x: np.ndarray, M: np.ndarray) -> np.ndarray:
     x = np.asarray(x, dtype=np.float64)
     M = np.asarray(M, dtype=np.float64)
     if M.ndim == 1:
-        out = x[:, 0] * M[0]
-        for c in range(1, M.shape[0]):
-            out = out + x[:, c] * M[c]
-        return out
+        return rows_dot(x, M[None])[:, 0]
     out = x[:, 0:1] * M[None, :, 0]
     for c in range(1, M.shape[1]):
         out = out + x[:, c : c + 1] * M[None, :, c]

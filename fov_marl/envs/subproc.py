@@ -74,8 +74,13 @@ import gymnasium
 import numpy as np
 
 from fov_marl.config import ScenarioConfig
-from fov_marl.envs.vector import FovVectorEnv, check_num_envs, check_vector_actions
-from fov_marl.validation import check_seed, describe
+from fov_marl.envs.vector import (
+    FovVectorEnv,
+    check_num_envs,
+    check_vector_actions,
+    vector_seeds,
+)
+from fov_marl.validation import check_int, describe
 
 __all__ = ["SubprocVectorEnv", "build_raw_vector_env", "make_vector_env"]
 
@@ -111,9 +116,7 @@ def make_vector_env(
     """The ``vector_env`` of the scenario modules: one :class:`FovVectorEnv` for
     ``workers = 1``, else a :class:`SubprocVectorEnv` of ``workers`` shards of it (the
     config validated here, once, before any process starts)."""
-    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
-        raise ValueError(f"workers must be an integer in [1, num_envs], got {describe(workers)}")
-    if workers == 1:
+    if check_int("workers", workers, 1, note="(at most num_envs)") == 1:
         return FovVectorEnv(num_envs, scenario, name, config_kwargs, eta_method=eta_method)
     probe = FovVectorEnv(1, scenario, name, config_kwargs, eta_method=eta_method)
     make = partial(build_raw_vector_env, config=probe.config, eta_method=eta_method)
@@ -237,10 +240,7 @@ class SubprocVectorEnv:
         start_method: str | None = None,
     ) -> None:
         B = check_num_envs(num_envs)
-        if isinstance(workers, bool) or not isinstance(workers, int | np.integer):
-            raise ValueError(f"workers must be an integer in [1, {B}], got {describe(workers)}")
-        if not 1 <= workers <= B:
-            raise ValueError(f"workers must be an integer in [1, num_envs = {B}], got {workers}")
+        workers = check_int("workers", workers, 1, B, note="(at most num_envs)")
         if not callable(make_vector):
             raise ValueError(f"make_vector must be callable, got {describe(make_vector)}")
         try:
@@ -259,7 +259,6 @@ class SubprocVectorEnv:
         self._closed = True
         self._conns: list[Any] = []
         self._procs: list[Any] = []
-        self._pending: list[int] = [0] * int(workers)
         self.num_envs = B
         self.workers = int(workers)
         sizes = [len(a) for a in np.array_split(np.arange(B), self.workers)]
@@ -324,17 +323,20 @@ class SubprocVectorEnv:
                 n -= 1
             self._pending[w] = 0
 
-    def _send(self, w: int, cmd: str, arg: Any = None) -> None:
-        if w == 0:
-            self._drain()
-        self._pending[w] += 1
-        try:
-            self._conns[w].send((cmd, arg))
-        except (BrokenPipeError, OSError):
-            raise RuntimeError(
-                f"worker {w} of the SubprocVectorEnv has exited "
-                f"(exit code {self._procs[w].exitcode})"
-            ) from None
+    def _broadcast(self, cmd: str, args: list[Any]) -> list[Any]:
+        """Send ``(cmd, args[w])`` to every worker w, then collect their answers."""
+        self._check_open()
+        self._drain()
+        for w, arg in enumerate(args):
+            self._pending[w] += 1
+            try:
+                self._conns[w].send((cmd, arg))
+            except (BrokenPipeError, OSError):
+                raise RuntimeError(
+                    f"worker {w} of the SubprocVectorEnv has exited "
+                    f"(exit code {self._procs[w].exitcode})"
+                ) from None
+        return self._recv_all()
 
     def _recv_all(self) -> list[Any]:
         """Every shard's answer, in order; the first error is raised after all answered."""
@@ -367,10 +369,7 @@ class SubprocVectorEnv:
         return results
 
     def _all(self, cmd: str, arg: Any = None) -> list[Any]:
-        self._check_open()
-        for w in range(self.workers):
-            self._send(w, cmd, arg)
-        return self._recv_all()
+        return self._broadcast(cmd, [arg] * self.workers)
 
     # ------------------------------------------------------------- episode
     def reset(
@@ -378,26 +377,14 @@ class SubprocVectorEnv:
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every copy (see the module docstring for the seeds)."""
         self._check_open()
-        B = self.num_envs
         st = self._starts
-        if seed is None or isinstance(seed, int | np.integer | bool):
-            s = check_seed("seed", seed)
-            shard_seeds: list[Any] = [None if s is None else s + int(k) for k in st[:-1]]
-        elif isinstance(seed, Sequence | np.ndarray) and not isinstance(seed, str | bytes):
-            seeds = list(seed)
-            if len(seeds) != B:
-                raise ValueError(
-                    f"seed must be None, an int or a sequence of num_envs = {B} seeds, "
-                    f"got a sequence of {len(seeds)}"
-                )
-            # checked here, so a bad entry is named by its copy and no shard has reset
-            seeds = [check_seed(f"seed[{k}]", x) for k, x in enumerate(seeds)]
-            shard_seeds = [seeds[st[w] : st[w + 1]] for w in range(self.workers)]
+        # checked here, so a bad entry is named by its copy and no shard has reset
+        seeds = vector_seeds(seed, self.num_envs)
+        if seed is None or isinstance(seed, int | np.integer):  # shard w: s + k_w (or None)
+            shard_seeds: list[Any] = [seeds[k] for k in st[:-1]]
         else:
-            raise ValueError(f"seed must be None, an int or a sequence of ints, got {seed!r}")
-        for w in range(self.workers):
-            self._send(w, "reset", (shard_seeds[w], options))
-        parts = self._recv_all()
+            shard_seeds = [seeds[st[w] : st[w + 1]] for w in range(self.workers)]
+        parts = self._broadcast("reset", [(s, options) for s in shard_seeds])
         self._needs_reset = False
         obs = np.concatenate([p[0] for p in parts], axis=0)
         return obs, merge_vector_infos([p[1] for p in parts])
@@ -411,9 +398,7 @@ class SubprocVectorEnv:
             raise ValueError("step() called before reset(); call reset() first")
         act = check_vector_actions(actions, self.num_envs, self.n_agents)
         st = self._starts
-        for w in range(self.workers):
-            self._send(w, "step", act[st[w] : st[w + 1]])
-        parts = self._recv_all()
+        parts = self._broadcast("step", [act[st[w] : st[w + 1]] for w in range(self.workers)])
         obs, rew, term, trunc = (np.concatenate([p[i] for p in parts]) for i in range(4))
         infos = merge_vector_infos([p[4] for p in parts])
         cpu = [p[5] for p in parts]

@@ -68,7 +68,7 @@ from fov_marl.envs.base import scenario_config
 from fov_marl.envs.core import CORES, BatchedCore
 from fov_marl.validation import check_seed, describe
 
-__all__ = ["FovVectorEnv", "check_num_envs", "check_vector_actions"]
+__all__ = ["FovVectorEnv", "check_num_envs", "check_vector_actions", "vector_seeds"]
 
 
 def check_num_envs(num_envs: Any) -> int:
@@ -76,6 +76,26 @@ def check_num_envs(num_envs: Any) -> int:
     if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
         raise ValueError(f"num_envs must be an integer in [1, inf), got {describe(num_envs)}")
     return int(num_envs)
+
+
+def vector_seeds(seed: Any, num_envs: int) -> list[int | None]:
+    """The seed of each of ``num_envs`` copies from a vector ``reset(seed=...)``: an int s
+    gives copy k ``s + k``; a sequence of ``num_envs`` ints or None entries is checked
+    entry by entry (``seed[k]`` named); None gives every copy None (continue its
+    generator). Anything else raises ``ValueError``."""
+    B = num_envs
+    if seed is None or isinstance(seed, int | np.integer | bool):
+        s = check_seed("seed", seed)
+        return [None if s is None else s + k for k in range(B)]
+    if isinstance(seed, Sequence | np.ndarray) and not isinstance(seed, str | bytes):
+        seeds = [check_seed(f"seed[{k}]", x) for k, x in enumerate(seed)]
+        if len(seeds) != B:
+            raise ValueError(
+                f"seed must be None, an int or a sequence of num_envs = {B} seeds, "
+                f"got a sequence of {len(seeds)}"
+            )
+        return seeds
+    raise ValueError(f"seed must be None, an int or a sequence of ints, got {seed!r}")
 
 
 def check_vector_actions(actions: Any, num_envs: int, n_agents: int) -> np.ndarray:
@@ -197,19 +217,7 @@ class FovVectorEnv:
                 entries) seeds copies one by one; None continues every copy's generator.
             options: a dict or None (unused by these scenarios).
         """
-        B = self.num_envs
-        if seed is None or isinstance(seed, int | np.integer) or isinstance(seed, bool):
-            s = check_seed("seed", seed)
-            seeds: list[int | None] = [None if s is None else s + k for k in range(B)]
-        elif isinstance(seed, Sequence | np.ndarray) and not isinstance(seed, str | bytes):
-            seeds = [check_seed(f"seed[{k}]", x) for k, x in enumerate(seed)]
-            if len(seeds) != B:
-                raise ValueError(
-                    f"seed must be None, an int or a sequence of num_envs = {B} seeds, "
-                    f"got a sequence of {len(seeds)}"
-                )
-        else:
-            raise ValueError(f"seed must be None, an int or a sequence of ints, got {seed!r}")
+        seeds = vector_seeds(seed, self.num_envs)
         if options is not None and not isinstance(options, Mapping):
             raise ValueError(f"options must be a dict or None, got {describe(options)}")
         obs, metrics = self._core.reset(self._all, seeds)

@@ -46,6 +46,8 @@ import numpy as np
 from fov_marl.config import ScenarioConfig
 from fov_marl.control import ControllerParams
 from fov_marl.control.batched import CONTROL_STATUSES
+from fov_marl.envs.subproc import build_raw_vector_env
+from fov_marl.envs.vector import vector_seeds
 from fov_marl.estimation import TrackerParams
 from fov_marl.pipeline import PfCbfPipeline
 from fov_marl.spaces import action_to_velocity
@@ -129,15 +131,8 @@ class VectorSafetyFilterWrapper:
         ``s + k``), a sequence of B ints or None entries (per copy; None continues that
         copy's generators), or None (every copy continues)."""
         obs, infos = self.venv.reset(seed=seed, options=options)
-        B = self.num_envs
-        if seed is None:
-            per_copy: list[Any] = [None] * B
-        elif isinstance(seed, int | np.integer):
-            per_copy = [int(seed) + k for k in range(B)]
-        else:  # a sequence, already checked by the env
-            per_copy = [None if x is None else int(x) for x in seed]
         seeds = []
-        for k, s_k in enumerate(per_copy):
+        for k, s_k in enumerate(vector_seeds(seed, self.num_envs)):
             if s_k is not None:
                 self._seed_rngs[k] = np.random.default_rng(s_k)
                 seeds.append(s_k)
@@ -229,8 +224,6 @@ def build_filtered_vector_env(
     ``functools.partial`` of it is a picklable shard factory of
     :class:`~fov_marl.envs.SubprocVectorEnv` (``fov-marl train --safety-filter
     --workers W``)."""
-    from fov_marl.envs.subproc import build_raw_vector_env
-
     venv = build_raw_vector_env(
         num_envs, config=config, max_cycles=max_cycles, eta_method=eta_method
     )

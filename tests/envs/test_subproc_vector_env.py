@@ -176,7 +176,8 @@ def test_copies_pickles_and_interrupted_calls_leave_the_env_working():
         _assert_same_step(one.reset(seed=1), sub.reset(seed=1))
         act = np.zeros((3, N, 3))
         for w in range(sub.workers):  # what a step interrupted before its answers leaves
-            sub._send(w, "step", act[sub._starts[w] : sub._starts[w + 1]])
+            sub._conns[w].send(("step", act[sub._starts[w] : sub._starts[w + 1]]))
+            sub._pending[w] += 1
         one.step(act)
         np.testing.assert_array_equal(sub.num_steps, one.num_steps)  # not the stale step
         np.testing.assert_array_equal(sub.poses, one.poses)
