@@ -23,7 +23,7 @@ from fov_marl.envs.core import CORES, BatchedCore
 from fov_marl.envs.rendering import HumanWindow, RenderLayer, render_frame
 from fov_marl.infos import agent_infos
 from fov_marl.spaces import ObservationLayout
-from fov_marl.validation import ConfigError, as_real_vector, check_seed, describe
+from fov_marl.validation import ConfigError, as_real_vector, check_int, check_seed, describe
 
 __all__ = ["FovEnvBase", "scenario_config"]
 
@@ -96,6 +96,16 @@ class FovEnvBase(ParallelEnv):
         )
         self._layers: list[RenderLayer] = []
         self._window: HumanWindow | None = None
+
+    @property
+    def max_cycles(self) -> int:
+        """Steps before truncation (default: the config's ``max_cycles``); settable, an
+        integer in [1, inf), else ``ValueError`` naming ``max_cycles``."""
+        return self._max_cycles
+
+    @max_cycles.setter
+    def max_cycles(self, value: int) -> None:
+        self._max_cycles = check_int("max_cycles", value, 1)
 
     # ----------------------------------------------------------------- spaces
     def observation_space(self, agent: str) -> gymnasium.spaces.Box:

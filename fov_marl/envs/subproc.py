@@ -151,6 +151,7 @@ def _worker(conn: Any, make_vector: Callable[[int], Any], num_envs: int) -> None
         conn.send(("error", _error(exc)))
         conn.close()
         return
+    static["per_copy_wrappers"] = tuple(getattr(venv, "per_copy_wrappers", ()))
     conn.send(("ok", static))
     while True:
         try:
@@ -295,6 +296,8 @@ class SubprocVectorEnv:
         self.single_action_space = s0["single_action_space"]
         self.metadata = dict(s0["metadata"])
         self._max_cycles = int(s0["max_cycles"])
+        #: the per-copy wrappers the shards stand for (``VectorSafetyFilterWrapper``'s)
+        self.per_copy_wrappers: tuple[type, ...] = tuple(s0["per_copy_wrappers"])
         low = self.single_observation_space.low
         high = self.single_observation_space.high
         shape = (B, self.n_agents, *low.shape)
@@ -413,6 +416,7 @@ class SubprocVectorEnv:
 
     @max_cycles.setter
     def max_cycles(self, value: int) -> None:
+        value = check_int("max_cycles", value, 1)  # checked here: no shard sees a bad one
         self._all("set", ("max_cycles", value))
         self._max_cycles = int(self.get_attr("max_cycles")[0])
 

@@ -66,7 +66,7 @@ import numpy as np
 from fov_marl.config import ScenarioConfig
 from fov_marl.envs.base import scenario_config
 from fov_marl.envs.core import CORES, BatchedCore
-from fov_marl.validation import check_seed, describe
+from fov_marl.validation import check_int, check_seed, describe
 
 __all__ = ["FovVectorEnv", "check_num_envs", "check_vector_actions", "vector_seeds"]
 
@@ -84,6 +84,8 @@ def vector_seeds(seed: Any, num_envs: int) -> list[int | None]:
     entry by entry (``seed[k]`` named); None gives every copy None (continue its
     generator). Anything else raises ``ValueError``."""
     B = num_envs
+    if isinstance(seed, np.ndarray) and seed.ndim == 0:  # a 0-d array: its scalar
+        seed = seed.item()
     if seed is None or isinstance(seed, int | np.integer | bool):
         s = check_seed("seed", seed)
         return [None if s is None else s + k for k in range(B)]
@@ -207,6 +209,16 @@ class FovVectorEnv:
         return cls(num_envs, config.scenario, name, config=config, eta_method=eta_method)
 
     # ------------------------------------------------------------- episode
+    @property
+    def max_cycles(self) -> int:
+        """Steps before truncation, every copy (default: the config's); settable, an
+        integer in [1, inf), else ``ValueError`` naming ``max_cycles``."""
+        return self._max_cycles
+
+    @max_cycles.setter
+    def max_cycles(self, value: int) -> None:
+        self._max_cycles = check_int("max_cycles", value, 1)
+
     def reset(
         self, seed: int | Sequence[int] | None = None, options: dict | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import itertools
 from collections.abc import Callable
 from typing import Any
 
@@ -48,14 +49,24 @@ class FovMarlClass(PettingZooClass):
     def get_env_fun(
         self, num_envs: int, continuous_actions: bool, seed: int | None, device: Any
     ) -> Callable[[], EnvBase]:
+        """The env factory of BenchMARL's training and evaluation envs. Its k-th call
+        (k = 0, 1, ...) builds an env whose first reset uses ``seed + k``: the copies of a
+        ``SerialEnv(n, make)`` (how BenchMARL batches the training env) start from
+        different configurations, as the copies of a fov_marl vector env do, instead of
+        all from ``seed``. (Each process of a parallel collector counts its own calls.)
+        ``seed=None`` leaves every copy to OS entropy."""
         if not continuous_actions:
             raise ValueError("fov_marl tasks have continuous actions only (Box(-1, 1, (3,)))")
         config = copy.deepcopy(self.config)
         scenario = self.scenario
+        calls = itertools.count()
 
         def make() -> EnvBase:
+            k = next(calls)
             return wrap(
-                make_parallel_env(scenario, **copy.deepcopy(config)), seed=seed, device=device
+                make_parallel_env(scenario, **copy.deepcopy(config)),
+                seed=None if seed is None else seed + k,
+                device=device,
             )
 
         return make

@@ -74,7 +74,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnvStepReturn,
 )
 
-from fov_marl.infos import METRICS_PREFIX, AgentInfo, status_code
+from fov_marl.infos import METRICS_PREFIX, AgentInfo, reset_safety_infos, status_code
 
 __all__ = [
     "ParallelEnvVecEnv",
@@ -395,7 +395,12 @@ class VectorEnvVecEnv(VecEnv):
 
     Attribute access acts on the one vector env: ``get_attr`` returns its attribute
     once per slot, ``set_attr`` sets it (e.g. ``max_cycles``), ``env_method`` calls it
-    once and repeats the result per slot; ``env_is_wrapped`` is False (no wrappers).
+    once and repeats the result per slot; ``env_is_wrapped(cls)`` is True where the vector
+    env stands for a per-copy wrapper ``cls`` (its ``per_copy_wrappers``: the
+    :class:`~fov_marl.wrappers.VectorSafetyFilterWrapper`, in one process or in the shards
+    of a :class:`~fov_marl.envs.SubprocVectorEnv`, for ``SafetyFilterWrapper``), as on the
+    per-copy adapter. Behind the filter, ``reset_infos`` hold the neutral ``"safety/*"``
+    entries of a reset (also after an automatic reset), as the per-copy filter gives.
 
     Args:
         venv: a :class:`~fov_marl.envs.vector.FovVectorEnv` (or an object with its API).
@@ -478,6 +483,8 @@ class VectorEnvVecEnv(VecEnv):
         seed, self._base_seed = self._base_seed, None
         obs, infos = self.venv.reset(seed=seed)
         self.reset_infos = self._infos(infos["metrics"])
+        if "safety" in infos:  # a vector safety filter: the neutral report of a reset
+            self._add_safety(self.reset_infos, infos["safety"])
         self._reset_seeds()
         self._reset_options()
         return obs.reshape(self.num_envs, *self._obs_shape).astype(np.float32, copy=False)
@@ -506,6 +513,8 @@ class VectorEnvVecEnv(VecEnv):
         if done_copy.any():
             final = vinfos["final_obs"].reshape(self.num_envs, *self._obs_shape)
             reset_infos = self._infos(vinfos["reset_metrics"])
+            if "safety" in vinfos:  # what the per-copy filter reports at reset()
+                reset_safety_infos(dict(enumerate(reset_infos)))
             for s in np.flatnonzero(dones).tolist():
                 infos[s]["terminal_observation"] = final[s].astype(np.float32, copy=True)
                 infos[s]["TimeLimit.truncated"] = bool(time_limit[s])
@@ -550,8 +559,11 @@ class VectorEnvVecEnv(VecEnv):
         return [result for _ in slots]
 
     def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
-        """Always False: the vector env has no wrappers."""
-        return [False for _ in self._slots(indices)]
+        """True per slot where the vector env stands for the per-copy ``wrapper_class``
+        (its ``per_copy_wrappers``, e.g. ``SafetyFilterWrapper`` behind the filter)."""
+        stands_for = getattr(self.venv, "per_copy_wrappers", ())
+        wrapped = any(issubclass(c, wrapper_class) for c in stands_for)
+        return [wrapped for _ in self._slots(indices)]
 
 
 def make_vector_vec_env(

@@ -17,7 +17,8 @@ as a per-copy wrapper does on ``reset()`` without a seed.
 
 ``infos["safety"]`` holds ``(B, N, ...)`` arrays: ``nominal_action`` (3,) float32,
 ``applied_action`` (3,) float32, ``intervened`` bool, ``status`` str (object array),
-``fallback`` bool (see :class:`~fov_marl.wrappers.SafetyFilterWrapper`). ``last_cpu_s``:
+``fallback`` bool (see :class:`~fov_marl.wrappers.SafetyFilterWrapper`); ``reset()`` gives
+the neutral report (status ``"reset"``), as the per-copy wrapper does. ``last_cpu_s``:
 seconds the filter spent on all copies in the last step.
 
 Cost and the particle budget. The filter's cost grows about linearly with the
@@ -47,12 +48,16 @@ from fov_marl.config import ScenarioConfig
 from fov_marl.control import ControllerParams
 from fov_marl.control.batched import CONTROL_STATUSES
 from fov_marl.envs.subproc import build_raw_vector_env
-from fov_marl.envs.vector import vector_seeds
+from fov_marl.envs.vector import check_vector_actions, vector_seeds
 from fov_marl.estimation import TrackerParams
 from fov_marl.pipeline import PfCbfPipeline
 from fov_marl.spaces import action_to_velocity
 from fov_marl.validation import check_params
-from fov_marl.wrappers.safety_filter import FILTER_TRACKER_DEFAULTS, filter_controller_params
+from fov_marl.wrappers.safety_filter import (
+    FILTER_TRACKER_DEFAULTS,
+    SafetyFilterWrapper,
+    filter_controller_params,
+)
 
 __all__ = ["VectorSafetyFilterWrapper", "build_filtered_vector_env"]
 
@@ -71,6 +76,10 @@ class VectorSafetyFilterWrapper:
         controller: ``"auto"``, ``"batched"`` or ``"loop"`` (see
             :class:`~fov_marl.pipeline.PfCbfPipeline`).
     """
+
+    #: The per-copy wrappers this vector wrapper stands for (SB3's ``env_is_wrapped``
+    #: on a vector env's slots, :class:`~fov_marl.training.vec_env.VectorEnvVecEnv`).
+    per_copy_wrappers: tuple[type, ...] = (SafetyFilterWrapper,)
 
     def __init__(
         self,
@@ -140,23 +149,26 @@ class VectorSafetyFilterWrapper:
                 seeds.append(int(self._seed_rngs[k].integers(2**63)))
         self.pipeline.reset_arrays(obs, seeds, np.asarray(self.venv.poses))
         self._ready = True
+        infos = dict(infos)
+        infos["safety"] = self.reset_safety_infos()
         return obs, infos
 
+    def reset_safety_infos(self) -> dict[str, np.ndarray]:
+        """The neutral filter report of a reset, ``(B, N, ...)`` arrays as in
+        ``infos["safety"]``: zero actions, no intervention, status ``"reset"`` (what
+        :class:`~fov_marl.wrappers.SafetyFilterWrapper` reports at ``reset()``)."""
+        B, N = self.num_envs, self.n_agents
+        return {
+            "nominal_action": np.zeros((B, N, 3), np.float32),
+            "applied_action": np.zeros((B, N, 3), np.float32),
+            "intervened": np.zeros((B, N), dtype=bool),
+            "status": np.full((B, N), "reset", dtype=object),
+            "fallback": np.zeros((B, N), dtype=bool),
+        }
+
     def _actions(self, actions: Any) -> np.ndarray:
-        shape = (self.num_envs, self.n_agents, 3)
-        try:
-            act = np.asarray(actions, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"actions must be a numeric array of shape {shape}, got {type(actions).__name__}"
-            ) from None
-        if act.shape != shape:
-            raise ValueError(
-                f"actions must have shape (num_envs, n_agents, 3) = {shape}, got {act.shape}"
-            )
-        if not np.all(np.isfinite(act)):
-            raise ValueError("actions must be finite, got NaN or inf")
-        return act
+        # the raw vector env's check (one place): dtype, shape, finite, copy and robot named
+        return check_vector_actions(actions, self.num_envs, self.n_agents)
 
     def step(self, actions: Any):
         if not self._ready:

@@ -122,6 +122,11 @@ def test_vector_env_workers_keyword_and_seed_sequences():
             _assert_same_step(one.reset(seed=[7, 9, 3]), sub.reset(seed=[7, 9, 3]))
             # None continues that copy's generator, in its shard as in one process
             _assert_same_step(one.reset(seed=[7, None, 3]), sub.reset(seed=[7, None, 3]))
+            # a bad value is refused in the parent: no shard takes it
+            for bad in ("x", 2.7, 0):
+                with pytest.raises(ValueError, match="max_cycles must be an integer"):
+                    sub.max_cycles = bad
+            assert sub.get_attr("max_cycles") == [1000, 1000] and sub.max_cycles == 1000
             sub.max_cycles = 2
             one.max_cycles = 2
             assert sub.get_attr("max_cycles") == [2, 2]

@@ -188,6 +188,21 @@ def test_max_cycles_is_settable():
     assert trunc.all() and infos["_final_obs"].all()
 
 
+@pytest.mark.parametrize("value", ["10", -3, 0, 2.5, True, None], ids=repr)
+def test_bad_max_cycles_is_refused_before_anything_steps(value):
+    """Setting ``max_cycles`` to a non-integer or < 1 is a ValueError naming it, on the
+    vector env and on the ParallelEnv; the env keeps its value and steps as before (a
+    string used to be accepted and the next step failed after moving the world)."""
+    venv = fov_coverage_v0.vector_env(num_envs=2, n_agents=2)
+    env = fov_coverage_v0.parallel_env(n_agents=2)
+    for e in (venv, env):
+        with pytest.raises(ValueError, match=r"max_cycles must be an integer in \[1, inf\)"):
+            e.max_cycles = value
+        assert e.max_cycles == 1000
+    venv.max_cycles = np.int64(3)
+    assert venv.max_cycles == 3 and type(venv.max_cycles) is int
+
+
 @pytest.mark.parametrize(
     "num_envs", [0, -3, 2.0, "4", True, None, [2]], ids=lambda v: f"num_envs={v!r}"
 )
@@ -235,9 +250,13 @@ def test_step_before_reset_and_bad_seed():
     venv = fov_coverage_v0.vector_env(num_envs=2)
     with pytest.raises(ValueError, match="reset"):
         venv.step(np.zeros((2, 6, 3)))
-    for bad in (-1, 1.5, "3", [1, 2, 3], [1, -2]):
+    for bad in (-1, 1.5, "3", [1, 2, 3], [1, -2], np.array(-1), np.array(1.5)):
         with pytest.raises(ValueError, match="seed"):
             venv.reset(seed=bad)
+    # a 0-d integer array is its scalar (it raised TypeError)
+    a, _ = venv.reset(seed=np.array(3))
+    b, _ = venv.reset(seed=3)
+    np.testing.assert_array_equal(a, b)
     with pytest.raises(ValueError, match="options"):
         venv.reset(seed=0, options=[1])
 

@@ -124,3 +124,28 @@ def test_mappo_trains_a_few_iterations(tmp_path):
     wall = time.perf_counter() - t0
     print(f"benchmarl mappo: 5 iterations x 1200 frames in {wall:.1f} s")
     assert exp.n_iters_performed == 5 and exp.total_frames == 6000
+
+
+def test_serial_training_env_copies_start_from_different_seeds():
+    """Copy k of the SerialEnv BenchMARL builds starts from seed + k (it was every copy
+    from seed: all copies started every episode from one configuration)."""
+    import torch
+    from torchrl.envs import SerialEnv
+
+    task = _tasks().COVERAGE.get_task({"n_agents": 3, "max_cycles": 4})
+    env = SerialEnv(3, task.get_env_fun(num_envs=3, continuous_actions=True, seed=5, device="cpu"))
+    try:
+        st = env.reset()["state"]
+        assert not torch.equal(st[0], st[1]) and not torch.equal(st[1], st[2])
+        # each copy is an env the factory seeded with 5 + k (SerialEnv may build one more
+        # env for its specs first, so the copies' k need not start at 0)
+        starts = []
+        for k in range(5):
+            fn = task.get_env_fun(num_envs=1, continuous_actions=True, seed=5 + k, device="cpu")
+            one = fn()
+            starts.append(one.reset()["state"])
+            one.close()
+        for c in range(3):
+            assert any(torch.equal(st[c], x) for x in starts)
+    finally:
+        env.close()

@@ -472,6 +472,20 @@ def test_filtered_vector_adapter_matches_per_copy_filters_slot_by_slot():
     ours.seed(11)
     ref.seed(11)
     np.testing.assert_allclose(ours.reset(), ref.reset(), atol=1e-5)
+
+    def same_reset_infos():  # the neutral safety/* of a reset too (they were missing)
+        for x, y in zip(ours.reset_infos, ref.reset_infos, strict=True):
+            assert set(x) == set(y)
+            sx, sy = safety_of(x), safety_of(y)
+            assert sx.keys() == sy.keys() and sx["status"] == "reset"
+            for key in sx:
+                np.testing.assert_array_equal(np.asarray(sx[key]), np.asarray(sy[key]))
+
+    same_reset_infos()
+    from fov_marl.wrappers import SafetyFilterWrapper
+
+    assert ours.env_is_wrapped(SafetyFilterWrapper) == ref.env_is_wrapped(SafetyFilterWrapper)
+    assert all(ours.env_is_wrapped(SafetyFilterWrapper))
     rng = np.random.default_rng(2)
     dones = changed = 0
     for _ in range(20):
@@ -488,6 +502,8 @@ def test_filtered_vector_adapter_matches_per_copy_filters_slot_by_slot():
             assert metrics_of(x)["collisions_total"] == metrics_of(y)["collisions_total"]
             changed += int(sx["intervened"])
         dones += int(da.sum())
+        if da.any():
+            same_reset_infos()
     assert dones >= 2 * ours.num_envs and changed > 0
 
 

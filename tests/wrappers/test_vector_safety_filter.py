@@ -124,11 +124,25 @@ def test_vector_filter_api_and_errors():
     assert venv.single_action_space.shape == (3,)
     with pytest.raises(ValueError, match="before reset"):
         venv.step(np.zeros((2, 3, 3)))
-    venv.reset(seed=0)
+    _, infos = venv.reset(seed=0)
+    # reset reports the neutral filter state, as the per-copy wrapper's reset() does
+    assert (infos["safety"]["status"] == "reset").all()
+    assert not infos["safety"]["intervened"].any() and not infos["safety"]["fallback"].any()
+    assert infos["safety"]["applied_action"].shape == (2, 3, 3)
     with pytest.raises(ValueError, match="shape"):
         venv.step(np.zeros((2, 4, 3)))
-    with pytest.raises(ValueError, match="finite"):
+    with pytest.raises(ValueError, match=r"finite.*actions\[0, 0\]"):
         venv.step(np.full((2, 3, 3), np.nan))
+    # the raw vector env's checks: bool, complex, str and object actions are refused
+    # (they were accepted here, complex ones losing their imaginary part)
+    for bad in (
+        np.zeros((2, 3, 3), bool),
+        np.zeros((2, 3, 3), complex),
+        np.full((2, 3, 3), "0.5"),
+        np.zeros((2, 3, 3), object),
+    ):
+        with pytest.raises(ValueError, match="actions must be a real"):
+            venv.step(bad)
     _, _, _, _, infos = venv.step(np.zeros((2, 3, 3)))
     assert infos["safety"]["applied_action"].shape == (2, 3, 3)
     assert infos["safety"]["status"].shape == (2, 3)
