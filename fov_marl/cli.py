@@ -285,7 +285,9 @@ def _filter_kwargs(args: argparse.Namespace, loaded: Any | None) -> dict[str, An
     on = bool(
         args.safety_filter or getattr(loaded, "safety_filter", False) or learned_filter(args.policy)
     )
-    return filter_kwargs(args.filter_tracker, args.filter_controller, on)
+    return filter_kwargs(
+        args.filter_tracker, args.filter_controller, on, init=getattr(args, "filter_init", None)
+    )
 
 
 def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:

@@ -1,4 +1,5 @@
-"""Command-line options of the safety filter: ``--filter-tracker`` and ``--filter-controller``.
+"""Command-line options of the safety filter: ``--filter-tracker``, ``--filter-controller``
+and ``--filter-init``.
 
 Shared by ``fov-marl evaluate``, ``render`` and ``train``. Each flag is repeatable as
 ``FIELD=VALUE`` (VALUE parsed as JSON) and sets one field of the filter's
@@ -9,6 +10,12 @@ on top of the filter's own defaults
 
     fov-marl train --safety-filter --filter-tracker n_particles_total=500 ...
     fov-marl evaluate --safety-filter --filter-controller safety_risk=0.01 ...
+    fov-marl stress --filter-init uniform ...
+
+``--filter-init`` picks the filter's particle initialisation (``init`` of
+:class:`~fov_marl.wrappers.SafetyFilterWrapper`): ``known`` (default, the paper's
+assumption: the team's start poses) or ``uniform`` (nothing known; every bearing then
+counts as unseen until the camera has looked at it).
 
 (P_T = 500 makes the filter about 3x faster and stays calibrated:
 ``tests/estimation/test_mixture_calibration.py``, ``fov-marl bench``.) The result is the
@@ -24,13 +31,15 @@ import argparse
 from collections.abc import Sequence
 from typing import Any
 
-__all__ = ["add_filter_arguments", "filter_kwargs"]
+__all__ = ["INITS", "add_filter_arguments", "filter_kwargs"]
 
 _FLAGS = (
     ("--filter-tracker", "filter_tracker", "tracker_params", "TrackerParams"),
     ("--filter-controller", "filter_controller", "controller_params", "ControllerParams"),
 )
 _EXAMPLE = {"--filter-tracker": "n_particles_total=500", "--filter-controller": "safety_risk=0.01"}
+#: ``--filter-init`` values (``SafetyFilterWrapper(init=...)``).
+INITS = ("known", "uniform")
 
 
 def add_filter_arguments(
@@ -47,6 +56,14 @@ def add_filter_arguments(
             help=f"{when}: a field of the filter's {cls}, repeatable, VALUE "
             f"parsed as JSON (e.g. {_EXAMPLE[flag]}), on top of the filter's defaults",
         )
+    parser.add_argument(
+        "--filter-init",
+        dest="filter_init",
+        choices=INITS,
+        default=None,
+        help=f"{when}: the filter's particle initialisation: known (the team's start "
+        "poses, the paper's assumption) or uniform (nothing known) (default: known)",
+    )
 
 
 def filter_kwargs(
@@ -54,17 +71,21 @@ def filter_kwargs(
     controller_items: Sequence[str] | None,
     safety_filter: bool,
     off_hint: str = "add --safety-filter",
+    init: str | None = None,
 ) -> dict[str, Any] | None:
-    """The ``SafetyFilterWrapper`` keywords of the two flags' items, validated.
+    """The ``SafetyFilterWrapper`` keywords of the flags' items, validated.
+
+    Args:
+        init: ``--filter-init`` (``"known"``, ``"uniform"`` or None: not given).
 
     Returns:
-        ``{"tracker_params": {...}, "controller_params": {...}}`` (only the given ones),
-        or None when neither flag was given.
+        ``{"tracker_params": {...}, "controller_params": {...}, "init": ...}`` (only the
+        given ones), or None when no flag was given.
 
     Raises:
         ValueError: an item that is not ``FIELD=VALUE``, an unknown field, a bad value
-            (the message starts with the flag and names the field), or either flag
-            without ``safety_filter`` (the message ends with ``off_hint``).
+            (the message starts with the flag and names the field), an unknown ``init``,
+            or any flag without ``safety_filter`` (the message ends with ``off_hint``).
     """
     from fov_marl.control import ControllerParams
     from fov_marl.estimation import TrackerParams
@@ -92,4 +113,10 @@ def filter_kwargs(
             msg = str(exc)
             raise ValueError(msg if msg.startswith(flag) else f"{flag} {msg}") from None
         out[key] = fields
+    if init is not None:
+        if not safety_filter:
+            raise ValueError(f"--filter-init sets the safety filter's options: {off_hint}")
+        if init not in INITS:
+            raise ValueError(f"--filter-init must be one of {list(INITS)}, got {init!r}")
+        out["init"] = init
     return out or None

@@ -313,6 +313,7 @@ class PfCbfPipeline:
         self._travel_pending = False
         self._blind_travel_world = np.zeros((self.n_rows, 2))
         self._bearing_travel = np.zeros_like(self._bearing_travel)
+        self._reset_bearing_travel(np.arange(self.n_rows))
         self._fov_lead = np.full(self.n_rows, -1, dtype=np.int64)
         self._yielded = np.zeros(self.n_rows, dtype=bool)
         self._unblocked = np.zeros(self.n_rows, dtype=bool)
@@ -334,6 +335,31 @@ class PfCbfPipeline:
             self._reset_last_seen(np.arange(self.n_rows), init)
         elif self.estimates == "oracle":
             self._oracle(init_all)
+
+    def _reset_bearing_travel(self, rows: np.ndarray) -> None:
+        """Start the blind travel budget of ``rows`` (safety Sections 2d-2e).
+
+        With ``init="known"`` the robot starts knowing where its neighbours are (their
+        particles start on the true poses): nothing is spent. With ``init="uniform"`` it
+        knows nothing, so every bearing counts as spent (``c_k = B``) until the camera has
+        had it in view: the robot may not approach a bearing it has not looked at since
+        the episode began. Measured before (filter, ``init="uniform"``, robots packed
+        1.1 m apart along a wall, ``straight`` adversary, N = 4, seed 1): a robot in the
+        safe fallback backed at 0.98 m/s into a neighbour 1.1 m behind it that it had
+        never seen and for which no uniform particle lay in that sector (0.90 m at step
+        6); the 0.5 m budget allowed it. The bearings in view at reset are released by
+        the first observation's reset (:func:`~fov_marl.control.safety.bearing_travel_reset`).
+        """
+        self._bearing_travel[rows] = 0.0
+        B = self.controller_params.blind_travel_m
+        if self.init == "uniform" and self.estimates == "tracker" and B > 0.0:
+            if self._bearing_travel.shape[1]:
+                self._bearing_travel[rows] = bearing_travel_reset(
+                    np.full((len(rows), self._bearing_travel.shape[1]), B),
+                    self._own_pose[rows, 2],
+                    self.config.fov_rad,
+                    math.pi / self._bearing_travel.shape[1],
+                )
 
     def _reset_last_seen(self, rows: np.ndarray, init: np.ndarray | None) -> None:
         """Forget the last-seen points of ``rows``; the known start poses ``init (B, N, 3)``
@@ -394,7 +420,7 @@ class PfCbfPipeline:
         self._applied = self._applied.copy()  # the last filter() output stays the caller's
         self._applied[rows] = 0.0
         self._blind_travel_world[rows] = 0.0
-        self._bearing_travel[rows] = 0.0
+        self._reset_bearing_travel(rows)
         self._fov_lead[rows] = -1
         self._yielded[rows] = False
         self._unblocked[rows] = False

@@ -811,6 +811,7 @@ def _cases_from_args(args: argparse.Namespace) -> list[StressCase]:
         getattr(args, "filter_controller", None),
         filtered,
         off_hint="drop --no-filter",
+        init=getattr(args, "filter_init", None),
     )
     if sf:
         cases = [StressCase(**{**c.describe(), "filter_kwargs": sf}) for c in cases]

@@ -152,3 +152,33 @@ def test_cli_stress_unfiltered_refuses_them(capsys):
     assert code == 2
     err = capsys.readouterr().err.strip()
     assert "--filter-controller" in err and "--no-filter" in err and len(err.splitlines()) == 1
+
+
+def test_filter_init_reaches_the_filter_of_evaluate_and_stress(tmp_path, built):
+    """``--filter-init uniform``: the filter starts without the team's start poses."""
+    assert filter_kwargs(None, None, True, init="uniform") == {"init": "uniform"}
+    assert filter_kwargs(["n_particles_total=300"], None, True, init="known") == {
+        "tracker_params": {"n_particles_total": 300},
+        "init": "known",
+    }
+    with pytest.raises(ValueError, match="--filter-init.*--safety-filter"):
+        filter_kwargs(None, None, False, init="uniform")
+    with pytest.raises(ValueError, match="--filter-init must be one of"):
+        filter_kwargs(None, None, True, init="nearby")
+    assert main(["evaluate", "--policy", "random", "--safety-filter", "--n-agents", "2",
+                 "--episodes", "1", "--max-cycles", "3", "--quiet",
+                 "--filter-init", "uniform"]) == 0  # fmt: skip
+    args = ["stress", "--adversaries", "straight", "--n-agents", "2", "--fov-deg", "120",
+            "--starts", "wall", "--episodes", "1", "--steps", "3", "--quiet",
+            "--filter-init", "uniform", "--json", str(tmp_path / "rows.json")]  # fmt: skip
+    assert main(args) == 0
+    assert built == [{"init": "uniform"}, {"init": "uniform"}]
+
+
+def test_cli_filter_init_errors_are_one_line(capsys):
+    assert main(["evaluate", "--filter-init", "uniform", "--episodes", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--filter-init" in err and "--safety-filter" in err and len(err.splitlines()) == 1
+    assert main(["stress", "--no-filter", "--filter-init", "uniform", "--quick"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--filter-init" in err and "--no-filter" in err and len(err.splitlines()) == 1

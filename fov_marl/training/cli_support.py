@@ -375,7 +375,12 @@ def run_train(args: argparse.Namespace) -> Path | int:
             raise ValueError(f"--init-from {args.init_from}: no such model.zip")
     from fov_marl.filter_options import filter_kwargs
 
-    sf_kwargs = filter_kwargs(args.filter_tracker, args.filter_controller, args.safety_filter)
+    sf_kwargs = filter_kwargs(
+        args.filter_tracker,
+        args.filter_controller,
+        args.safety_filter,
+        init=getattr(args, "filter_init", None),
+    )
     scenario, env_kwargs, sources = _resolve(args)
     hyperparams = parse_hyperparams(args.hp, flag="--hp")
     try:

@@ -158,6 +158,67 @@ def test_filter_controller_defaults_and_overrides():
     )
 
 
+def test_blind_travel_budget_is_half_the_margin_to_contact():
+    """B = min(0.5, (D_s − 2 r) / 2) unless given: a pair that never looks closes by at
+    most 2 B, less than the margin to contact from D_s. The paper's setting keeps 0.5 m."""
+    from fov_marl.config import make_config
+    from fov_marl.wrappers.safety_filter import filter_controller_defaults
+
+    assert filter_controller_defaults(make_config())["blind_travel_m"] == 0.5
+    tight = make_config(safety_distance_m=1.05, init_min_separation_m=1.1)
+    assert filter_controller_defaults(tight)["blind_travel_m"] == pytest.approx(0.025)
+    assert filter_controller_defaults(tight, {"blind_travel_m": 0.3})["blind_travel_m"] < 0.03
+    env = fov_coverage_v0.parallel_env(safety_distance_m=1.05, init_min_separation_m=1.1)
+    assert SafetyFilterWrapper(env).pipeline.controller_params.blind_travel_m == pytest.approx(
+        0.025
+    )
+    over = SafetyFilterWrapper(env, controller_params={"blind_travel_m": 0.3})
+    assert over.pipeline.controller_params.blind_travel_m == 0.3  # the user's value wins
+
+
+def test_uniform_init_counts_every_unseen_bearing_as_spent():
+    """With ``init="uniform"`` the robot knows nothing of its neighbours: every bearing
+    outside its view starts spent (c_k = B), the ones in view free; with the default
+    ``init="known"`` nothing is spent."""
+    from fov_marl.control.safety import bearing_angles_body
+
+    env = fov_coverage_v0.parallel_env(n_agents=3)
+    uni = SafetyFilterWrapper(env, init="uniform")
+    uni.reset(seed=0)
+    pipe = uni.pipeline
+    c = pipe._bearing_travel
+    B = pipe.controller_params.blind_travel_m
+    ang = np.abs(bearing_angles_body(c.shape[1], pipe.own_pose[:, 2]))
+    seen = ang <= env.unwrapped.config.fov_rad / 2 - math.pi / c.shape[1] + 1e-9
+    assert np.all(c[seen] == 0.0) and np.all(c[~seen] == B) and seen.any() and (~seen).any()
+    known = SafetyFilterWrapper(fov_coverage_v0.parallel_env(n_agents=3))
+    known.reset(seed=0)
+    assert np.all(known.pipeline._bearing_travel == 0.0)
+
+
+@pytest.mark.parametrize(
+    "adversary, n, start, env_kw, tracker",
+    [
+        ("straight", 4, "wall", {}, {}),
+        ("charge_centre", 4, "wall", {}, {}),
+        ("straight", 4, "wall", {}, {"n_particles_total": 50}),
+        ("head_on", 8, "random", {"safety_distance_m": 1.05, "init_min_separation_m": 1.1}, {}),
+        ("wall_slide", 8, "random", {"safety_distance_m": 1.05, "init_min_separation_m": 1.1}, {}),
+    ],
+)
+def test_uniform_init_and_a_thin_margin_do_not_collide(adversary, n, start, env_kw, tracker):
+    """The red team's episodes (seed 1, or 0 with 50 particles; 200 steps): with
+    ``init="uniform"`` a robot packed 1.1 m from a neighbour it had never seen backed into
+    it (0.90 m, step 6; 0.21 m with 50 particles), and with D_s = 1.05 m two blind robots
+    each spent the 0.5 m budget from a start outside D_s (0.795 m)."""
+    from fov_marl.stress import StressCase, run_stress_episode
+
+    filt = {"init": "uniform", **({"tracker_params": tracker} if tracker else {})}
+    case = StressCase(adversary, n, 120.0, start, env_kwargs=env_kw, filter_kwargs=filt)
+    row = run_stress_episode(case, 0 if tracker else 1, 200)
+    assert row["collisions"] == 0, row
+
+
 def _constant(action):
     def factory(env):
         class Const:
