@@ -347,8 +347,10 @@ class PfCbfPipeline:
         1.1 m apart along a wall, ``straight`` adversary, N = 4, seed 1): a robot in the
         safe fallback backed at 0.98 m/s into a neighbour 1.1 m behind it that it had
         never seen and for which no uniform particle lay in that sector (0.90 m at step
-        6); the 0.5 m budget allowed it. The bearings in view at reset are released by
-        the first observation's reset (:func:`~fov_marl.control.safety.bearing_travel_reset`).
+        6); the 0.5 m budget allowed it. The bearings in view at reset are released at
+        once (:func:`~fov_marl.control.safety.bearing_travel_reset`). The single budget
+        vector (``blind_travel_bearings = 0``, an ablation) has no per-bearing state and
+        starts at zero either way.
         """
         self._bearing_travel[rows] = 0.0
         B = self.controller_params.blind_travel_m
