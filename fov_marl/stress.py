@@ -527,14 +527,15 @@ def format_stress_table(rows: Sequence[Mapping[str, Any]]) -> str:
     """Plain-text table of :func:`run_stress` rows (one line per case), then a summary line."""
     from fov_marl.tables import format_table
 
-    def cell(key: str, v: Any) -> Any:
-        if key == "filtered":
-            return "yes" if v else "no"
+    def cell(key: str, v: Any, row: Mapping[str, Any]) -> Any:
+        if key == "filtered":  # "yes", or the particle initialisation when not the default
+            init = dict(row.get("filter_kwargs") or {}).get("init", "known")
+            return ("yes" if init == "known" else init) if v else "no"
         if key == "fov_deg":
             return f"{v:g}"
         return v
 
-    body = [[cell(k, r.get(k)) for _, k in STRESS_COLUMNS] for r in rows]
+    body = [[cell(k, r.get(k), r) for _, k in STRESS_COLUMNS] for r in rows]
     table = format_table(body, [h for h, _ in STRESS_COLUMNS])
     bad = sum(1 for r in rows if r.get("collisions", 0) > 0)
     eps = sum(int(r.get("episodes", 0)) for r in rows)

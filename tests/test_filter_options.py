@@ -182,3 +182,14 @@ def test_cli_filter_init_errors_are_one_line(capsys):
     assert main(["stress", "--no-filter", "--filter-init", "uniform", "--quick"]) == 2
     err = capsys.readouterr().err.strip()
     assert "--filter-init" in err and "--no-filter" in err and len(err.splitlines()) == 1
+
+
+def test_stress_table_names_a_uniform_filter_init():
+    from fov_marl.stress import format_stress_table
+
+    row = {"adversary": "straight", "n_agents": 2, "fov_deg": 120.0, "start": "wall",
+           "filtered": True, "episodes": 1, "collisions": 0}  # fmt: skip
+    uni = format_stress_table([{**row, "filter_kwargs": {"init": "uniform"}}])
+    assert "uniform" in uni.splitlines()[2]
+    assert " yes " in format_stress_table([row]).splitlines()[2]
+    assert " no " in format_stress_table([{**row, "filtered": False}]).splitlines()[2]
