@@ -352,16 +352,15 @@ class PfCbfPipeline:
         vector (``blind_travel_bearings = 0``, an ablation) has no per-bearing state and
         starts at zero either way.
         """
-        self._bearing_travel[rows] = 0.0
-        B = self.controller_params.blind_travel_m
-        if self.init == "uniform" and self.estimates == "tracker" and B > 0.0:
-            if self._bearing_travel.shape[1]:
-                self._bearing_travel[rows] = bearing_travel_reset(
-                    np.full((len(rows), self._bearing_travel.shape[1]), B),
-                    self._own_pose[rows, 2],
-                    self.config.fov_rad,
-                    math.pi / self._bearing_travel.shape[1],
-                )
+        K = self._bearing_travel.shape[1]
+        unknown = self.init == "uniform" and self.estimates == "tracker"
+        spent = self.controller_params.blind_travel_m if unknown else 0.0
+        self._bearing_travel[rows] = bearing_travel_reset(
+            np.full((len(rows), K), spent),
+            self._own_pose[rows, 2],
+            self.config.fov_rad,
+            math.pi / max(K, 1),
+        )
 
     def _reset_last_seen(self, rows: np.ndarray, init: np.ndarray | None) -> None:
         """Forget the last-seen points of ``rows``; the known start poses ``init (B, N, 3)``

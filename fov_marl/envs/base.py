@@ -25,7 +25,7 @@ from fov_marl.infos import agent_infos
 from fov_marl.spaces import ObservationLayout
 from fov_marl.validation import ConfigError, as_real_vector, check_int, check_seed, describe
 
-__all__ = ["FovEnvBase", "scenario_config"]
+__all__ = ["MAX_CYCLES", "FovEnvBase", "scenario_config"]
 
 
 def scenario_config(scenario: str, name: str, config_kwargs: dict[str, Any]) -> ScenarioConfig:
@@ -50,6 +50,23 @@ def scenario_config(scenario: str, name: str, config_kwargs: dict[str, Any]) -> 
 def metrics_row(metrics: dict[str, np.ndarray], k: int) -> dict[str, Any]:
     """Copy ``k`` of batched metrics as Python scalars (int for integer arrays, else float)."""
     return {key: v.item(k) for key, v in metrics.items()}
+
+
+def _set_max_cycles(env: Any, value: int) -> None:
+    env._max_cycles = check_int("max_cycles", value, 1)
+
+
+#: ``max_cycles`` of the ParallelEnv and of the vector env (one definition): steps before
+#: truncation (default: the config's); settable, an integer in [1, inf), else
+#: ``ValueError`` naming ``max_cycles``.
+MAX_CYCLES = property(
+    lambda env: env._max_cycles,
+    _set_max_cycles,
+    doc=(
+        "Steps before truncation (default: the config's ``max_cycles``); settable, an "
+        "integer in [1, inf), else ``ValueError`` naming ``max_cycles``."
+    ),
+)
 
 
 class FovEnvBase(ParallelEnv):
@@ -97,15 +114,7 @@ class FovEnvBase(ParallelEnv):
         self._layers: list[RenderLayer] = []
         self._window: HumanWindow | None = None
 
-    @property
-    def max_cycles(self) -> int:
-        """Steps before truncation (default: the config's ``max_cycles``); settable, an
-        integer in [1, inf), else ``ValueError`` naming ``max_cycles``."""
-        return self._max_cycles
-
-    @max_cycles.setter
-    def max_cycles(self, value: int) -> None:
-        self._max_cycles = check_int("max_cycles", value, 1)
+    max_cycles = MAX_CYCLES
 
     # ----------------------------------------------------------------- spaces
     def observation_space(self, agent: str) -> gymnasium.spaces.Box:

@@ -382,12 +382,10 @@ class SubprocVectorEnv:
         self._check_open()
         st = self._starts
         # checked here, so a bad entry is named by its copy and no shard has reset
-        seeds = vector_seeds(seed, self.num_envs)
-        if seed is None or isinstance(seed, int | np.integer):  # shard w: s + k_w (or None)
-            shard_seeds: list[Any] = [seeds[k] for k in st[:-1]]
-        else:
-            shard_seeds = [seeds[st[w] : st[w + 1]] for w in range(self.workers)]
-        parts = self._broadcast("reset", [(s, options) for s in shard_seeds])
+        seeds = vector_seeds(seed, self.num_envs)  # copy k's seed, sliced per shard
+        parts = self._broadcast(
+            "reset", [(seeds[st[w] : st[w + 1]], options) for w in range(self.workers)]
+        )
         self._needs_reset = False
         obs = np.concatenate([p[0] for p in parts], axis=0)
         return obs, merge_vector_infos([p[1] for p in parts])

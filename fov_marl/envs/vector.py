@@ -64,9 +64,9 @@ import gymnasium
 import numpy as np
 
 from fov_marl.config import ScenarioConfig
-from fov_marl.envs.base import scenario_config
+from fov_marl.envs.base import MAX_CYCLES, scenario_config
 from fov_marl.envs.core import CORES, BatchedCore
-from fov_marl.validation import check_int, check_seed, describe
+from fov_marl.validation import check_seed, describe
 
 __all__ = ["FovVectorEnv", "check_num_envs", "check_vector_actions", "vector_seeds"]
 
@@ -209,15 +209,7 @@ class FovVectorEnv:
         return cls(num_envs, config.scenario, name, config=config, eta_method=eta_method)
 
     # ------------------------------------------------------------- episode
-    @property
-    def max_cycles(self) -> int:
-        """Steps before truncation, every copy (default: the config's); settable, an
-        integer in [1, inf), else ``ValueError`` naming ``max_cycles``."""
-        return self._max_cycles
-
-    @max_cycles.setter
-    def max_cycles(self, value: int) -> None:
-        self._max_cycles = check_int("max_cycles", value, 1)
+    max_cycles = MAX_CYCLES  # every copy's
 
     def reset(
         self, seed: int | Sequence[int] | None = None, options: dict | None = None
