@@ -323,6 +323,9 @@ def _filter_specs(filter_on: bool) -> dict[str, dict]:
     ):
         valid = {"good": [ok]} if filter_on else {"good": [], "either": [ok]}
         out[flag] = {"bad": bad, **valid, "append": True}
+    inits = ["known", "uniform"]
+    valid = {"good": inits} if filter_on else {"good": [], "either": inits}
+    out["--filter-init"] = {"bad": ["nearby", "", "KNOWN", "uniform "], **valid}
     return out
 
 
