@@ -211,7 +211,10 @@ class ScenarioConfig:
             still fail near it, with a ``ValueError`` naming this field).
         crossing_radius_m: crossing scenario: starts and targets lie on a circle
             of this radius around the arena centre, in (0, 1e6] m; crossing: in
-            (0, L/2 - robot_radius_m].
+            (0, L/2 - robot_radius_m], and (N > 1) wide enough that no jitter draw puts
+            two starts (or two targets) closer than two radii:
+            ``2 R sin(π/N) − 2√2 crossing_jitter_m ≥ 2 robot_radius_m`` (at the
+            defaults R = 12 m, jitter 0.5 m: N ≤ 31).
         crossing_jitter_m: crossing scenario: uniform jitter of starts and
             targets, in [0, 1e6] m; crossing: in [0, L/2].
         target_tolerance_m: crossing: a robot has arrived when closer than this to
@@ -351,6 +354,21 @@ class ScenarioConfig:
             "crossing_jitter_m", self.crossing_jitter_m, 0.0, L / 2,
             note=f"(arena_size_m / 2, with arena_size_m = {L})",
         )  # fmt: skip
+        n, j = self.n_agents, self.crossing_jitter_m
+        if n > 1:
+            # the targets always lie on the ring, the starts unless initial_poses. Adjacent
+            # ring points are 2 R sin(pi / N) apart; the jitter moves each by at most
+            # sqrt(2) j and the clip into the arena moves none farther from its ring point
+            # (a projection onto a convex set holding it): the worst draw is this bound
+            gap = 2.0 * self.crossing_radius_m * math.sin(math.pi / n) - 2.0 * math.sqrt(2.0) * j
+            if not gap >= 2.0 * r:
+                raise ConfigError(
+                    f"crossing_radius_m = {self.crossing_radius_m}: with n_agents = {n} and "
+                    f"crossing_jitter_m = {j} two starts (or targets) may lie {gap:.6g} m "
+                    f"apart, below 2 * robot_radius_m = {2 * r}; need 2 crossing_radius_m "
+                    "sin(pi / n_agents) - 2.83 crossing_jitter_m >= 2 robot_radius_m "
+                    "(raise crossing_radius_m, lower n_agents or crossing_jitter_m)"
+                )
 
     # ------------------------------------------------------------------ derived
     @property

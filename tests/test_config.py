@@ -8,6 +8,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fov_marl.config import ConfigError, ScenarioConfig, make_config
 
@@ -334,6 +336,58 @@ def test_crossing_fields_do_not_constrain_coverage():
     make_config(scenario="crossing", crossing_radius_m=19.5)
     with pytest.raises(ConfigError, match=r"crossing_jitter_m must be in \[0.0, 20.0\]"):
         make_config(scenario="crossing", crossing_jitter_m=21.0)
+
+
+@pytest.mark.parametrize(
+    ("changes", "fits"),
+    [
+        ({"n_agents": 31}, True),  # defaults R = 12 m, jitter 0.5 m: N <= 31
+        ({"n_agents": 32}, False),
+        ({"n_agents": 60}, False),  # red team 3: started in collision
+        ({"crossing_radius_m": 1.0}, False),  # red team 3: N = 4 on a 1 m circle
+        ({"crossing_radius_m": 1.0, "crossing_jitter_m": 0.0}, True),  # 1.414 m apart
+        ({"crossing_radius_m": 0.7, "crossing_jitter_m": 0.0}, False),  # 0.99 m
+        ({"crossing_jitter_m": 5.6}, True),
+        ({"crossing_jitter_m": 5.7}, False),
+        ({"n_agents": 2, "crossing_radius_m": 0.5, "crossing_jitter_m": 0.0}, True),
+        ({"n_agents": 1, "crossing_radius_m": 1e-3}, True),  # one robot: nothing to hit
+    ],
+)
+def test_crossing_ring_must_keep_every_jittered_start_apart(changes, fits):
+    """Adjacent ring points are 2 R sin(π/N) apart and the jitter moves each by at most
+    √2 j: a config whose worst draw puts two starts closer than 2 r is a ValueError
+    naming crossing_radius_m, n_agents and crossing_jitter_m with the rule."""
+    if fits:
+        make_config(scenario="crossing", **changes)
+        return
+    with pytest.raises(ConfigError, match=r"^crossing_radius_m = .*n_agents = .*sin\(pi"):
+        make_config(scenario="crossing", **changes)
+    make_config(**changes)  # crossing fields never constrain coverage
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(2, 40),
+    radius=st.floats(0.5, 19.5),
+    jitter=st.floats(0.0, 3.0),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_every_accepted_crossing_layout_starts_without_collision(n, radius, jitter, seed):
+    """Property: whatever the draw (edge jitter included), an accepted crossing config
+    starts and targets its robots at least two radii apart."""
+    from fov_marl.envs.world import crossing_layout
+
+    try:
+        cfg = make_config(
+            scenario="crossing", n_agents=n, crossing_radius_m=radius, crossing_jitter_m=jitter
+        )
+    except ConfigError:
+        return
+    poses, targets = crossing_layout(cfg, np.random.default_rng(seed))
+    for pts in (poses[:, :2], targets):
+        d = np.hypot(*(pts[:, None] - pts[None]).transpose(2, 0, 1))
+        np.fill_diagonal(d, np.inf)
+        assert d.min() >= 2 * cfg.robot_radius_m - 1e-9
 
 
 def test_coverage_fields_do_not_constrain_crossing():

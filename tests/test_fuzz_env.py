@@ -112,9 +112,10 @@ SAFE_REAL: dict[tuple[str, str], tuple[float, float]] = {
     ("*", "dt_s"): (1e-6, 5.0),
     ("*", "init_min_separation_m"): (1.0, 5.0),
     ("coverage", "crossing_radius_m"): (1e-3, BIG),  # crossing field: free in coverage
-    ("crossing", "crossing_radius_m"): (1e-3, 19.5),
+    # N = 4, jitter 0.5: 2 R sin(pi/4) - 2 sqrt(2) 0.5 >= 1 (no two starts in collision)
+    ("crossing", "crossing_radius_m"): (1.71, 19.5),
     ("coverage", "crossing_jitter_m"): (0.0, BIG),
-    ("crossing", "crossing_jitter_m"): (0.0, 20.0),
+    ("crossing", "crossing_jitter_m"): (0.0, 5.6),  # R = 12, N = 4: jitter <= 5.65
     ("*", "target_tolerance_m"): (1e-6, BIG),
     ("coverage", "eta_grid_m"): (0.01, 1.0),
     ("crossing", "eta_grid_m"): (1e-9, 1.0),
@@ -144,7 +145,8 @@ RELATED: dict[str, set[str]] = {
     },
     "robot_radius_m": {"safety_distance_m", "init_min_separation_m", "crossing_radius_m"},
     "eta_grid_m": {"density_sigma_m", "sensing_radius_m"},
-    "n_agents": {"sensing_radius_m", "init_min_separation_m"},
+    "n_agents": {"sensing_radius_m", "init_min_separation_m", "crossing_radius_m"},
+    "crossing_jitter_m": {"crossing_radius_m"},
 }
 
 

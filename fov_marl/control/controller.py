@@ -88,6 +88,7 @@ from fov_marl.control.cbf import (
     normalise_rows,
     row_h_max,
 )
+from fov_marl.control.coverage import check_lloyd_stencil
 from fov_marl.control.params import STALL_FRACTION, TRANSLATES_FRACTION, ControllerParams
 from fov_marl.control.qp import HierarchicalQP
 from fov_marl.control.safety import ROW_CONE, ROW_WALL, arc_yaw_guard, team_safety_rows
@@ -299,6 +300,8 @@ class FovCbfController:
     def __init__(self, config: ScenarioConfig, params: ControllerParams | None = None) -> None:
         self.config = config
         self.params = params if params is not None else ControllerParams()
+        if config.scenario == "coverage":
+            check_lloyd_stencil(config, self.params)  # fail at construction, not mid-episode
         self.h_max = row_h_max(config, self.params.fov_margin_m)
         p = self.params
         # motion cone rows normalised like the CBF rows (authority ‖G_v‖ v_max = v_max)

@@ -53,9 +53,13 @@ import numpy as np
 from fov_marl.config import ScenarioConfig
 from fov_marl.control.params import ControllerParams
 from fov_marl.geometry import body_to_world
+from fov_marl.validation import check_budget
 
 __all__ = [
     "DesiredInput",
+    "MAX_LLOYD_STENCIL",
+    "check_lloyd_stencil",
+    "lloyd_radius_m",
     "lloyd_stencil",
     "coverage_centroids",
     "coverage_centroid_reference",
@@ -85,30 +89,97 @@ class DesiredInput:
     to_density_mean: np.ndarray
 
 
+#: most lattice points a Lloyd stencil may hold (:func:`check_lloyd_stencil`); the
+#: default R_s = 6 m at h = 0.4 m holds ~800, so this is ~125 times the paper's case
+MAX_LLOYD_STENCIL = 100_000
+
+
+def lloyd_radius_m(config: ScenarioConfig, grid_m: float) -> float:
+    """Radius of the Lloyd stencil: ``min(R_s, √2 L + 2h)``.
+
+    A robot inside the arena ``[0, L]²`` is within ``√2 L`` of every arena point, and
+    a stencil point farther than ``√2 L + h`` from it is more than ``h / 2`` outside
+    some wall, where the wall ramp weighs it 0: a larger disk gives the same cell.
+    So a sensing radius beyond the arena (e.g. R_s = 1000 m to ask for global Lloyd
+    in a 40 m arena) costs no more than ``√2 L + 2h``.
+
+    Args:
+        config: uses ``sensing_radius_m`` R_s and ``arena_size_m`` L.
+        grid_m: the stencil spacing h (m).
+    """
+    return float(min(config.sensing_radius_m, math.sqrt(2.0) * config.arena_size_m + 2.0 * grid_m))
+
+
+def lloyd_stencil_size(radius_m: float, grid_m: float) -> float:
+    """Upper estimate of the points of :func:`lloyd_stencil` (``π (R/h + 1.5)²``)."""
+    return math.pi * (float(radius_m) / float(grid_m) + 1.5) ** 2
+
+
+def check_lloyd_stencil(config: ScenarioConfig, params: ControllerParams) -> None:
+    """Resource guard of the Lloyd quadrature: at most ``MAX_LLOYD_STENCIL`` points.
+
+    Raises:
+        ConfigError (a ``ValueError``): naming ``sensing_radius_m`` and
+        ``lloyd_grid_m`` when ``π (R / h + 1.5)²`` exceeds the limit, with R from
+        :func:`lloyd_radius_m` (at h = 0.4 m: R_s up to ~70 m, any R_s when the arena
+        side is at most ~48 m).
+    """
+    h = params.lloyd_grid_m
+    need = lloyd_stencil_size(lloyd_radius_m(config, h), h)
+    check_budget(
+        "sensing_radius_m",
+        config.sensing_radius_m,
+        need,
+        MAX_LLOYD_STENCIL,
+        "the Lloyd stencil pi (min(R_s, 1.414 L + 2 lloyd_grid_m) / lloyd_grid_m + 1.5)^2",
+        "points per robot",
+        f"lloyd_grid_m = {h}, arena_size_m = {config.arena_size_m}; raise lloyd_grid_m "
+        "or lower sensing_radius_m",
+    )
+
+
 @lru_cache(maxsize=16)
 def lloyd_stencil(sensing_radius_m: float, grid_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Fixed quadrature stencil around a robot (cached, read-only arrays).
 
+    Only the cells that straddle the circle are supersampled (16 × 16); a cell whose
+    far corner is inside the disk has fraction exactly 1, one whose near corner is
+    outside is dropped, so memory is O(K) for K points.
+
     Args:
-        sensing_radius_m: R_s (m).
+        sensing_radius_m: R_s (m), the stencil radius (see :func:`lloyd_radius_m`).
         grid_m: lattice spacing h (m).
 
     Returns:
         ``(offsets (K, 2) m, disk_fraction (K,))``: lattice points whose ``h × h``
         cell meets the disk ``‖o‖ ≤ R_s`` and the fraction of that cell inside it.
+
+    Raises:
+        ConfigError: when the stencil would exceed ``MAX_LLOYD_STENCIL`` points.
     """
     h = float(grid_m)
+    check_budget(
+        "sensing_radius_m", sensing_radius_m, lloyd_stencil_size(sensing_radius_m, h),
+        MAX_LLOYD_STENCIL, "the Lloyd stencil pi (R_s / lloyd_grid_m + 1.5)^2",
+        "points per robot", f"lloyd_grid_m = {h}",
+    )  # fmt: skip
     n = int(math.ceil(sensing_radius_m / h)) + 1
     ax = h * np.arange(-n, n + 1)
     ox, oy = np.meshgrid(ax, ax, indexing="ij")
     off = np.stack([ox.ravel(), oy.ravel()], -1)
-    near = np.hypot(off[:, 0], off[:, 1]) <= sensing_radius_m + h
-    off = off[near]
+    dist = np.hypot(off[:, 0], off[:, 1])
+    near = dist <= sensing_radius_m + h
+    off, dist = off[near], dist[near]
+    frac = np.ones(off.shape[0])
+    # sub-cell points lie within h/√2 of the cell centre: outside this band the 256
+    # samples all agree (fraction exactly 1 or 0)
+    ring = np.flatnonzero(np.abs(dist - sensing_radius_m) <= h * (math.sqrt(0.5) + 1e-9))
+    frac[dist > sensing_radius_m + h * (math.sqrt(0.5) + 1e-9)] = 0.0
     sub = (np.arange(16) + 0.5) / 16 - 0.5
     sx, sy = np.meshgrid(sub, sub, indexing="ij")
     sub = h * np.stack([sx.ravel(), sy.ravel()], -1)
-    pts = off[:, None, :] + sub[None]
-    frac = np.mean(np.hypot(pts[..., 0], pts[..., 1]) <= sensing_radius_m, axis=1)
+    pts = off[ring, None, :] + sub[None]
+    frac[ring] = np.mean(np.hypot(pts[..., 0], pts[..., 1]) <= sensing_radius_m, axis=1)
     keep = frac > 0
     off, frac = off[keep], frac[keep]
     off.setflags(write=False)
@@ -159,7 +230,7 @@ def coverage_centroids(
     B = p.shape[0]
     nb = np.asarray(neighbours_world, dtype=np.float64).reshape(B, -1, 2)
     h = params.lloyd_grid_m
-    Rs = config.sensing_radius_m
+    Rs = lloyd_radius_m(config, h)
     L = config.arena_size_m
     reach = Rs + h
     off, frac, oo = _stencil_with_norms(Rs, h)
@@ -218,7 +289,9 @@ def coverage_centroids(
     expo = (oo[None, :] + 2.0 * (a @ off.T)) * (-0.5 / sig2)  # (B, K)
     mx = np.max(expo, axis=1, where=w > 0, initial=-np.inf)
     mx_safe = np.where(np.isfinite(mx), mx, 0.0)
-    e = w * np.exp(expo - mx_safe[:, None])
+    # points outside the cell (w = 0) may lie far above the cell's maximum (a narrow φ,
+    # σ ≪ R_s): capping at 0 keeps their exp finite, so 0 · exp is 0, not 0 · inf = NaN
+    e = w * np.exp(np.minimum(expo - mx_safe[:, None], 0.0))
     S = e.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         cen = p + (e @ off) / S[:, None]

@@ -49,11 +49,13 @@ autoreset; ``infos`` arrays are the shards' concatenated along the copy axis, an
 ``infos["reset_metrics"]`` is present when any copy finished, holding
 ``infos["metrics"]`` for the copies of shards where none did, as in one process) and
 ``close``. ``last_cpu_s``: the filter's seconds in the last step summed over the
-shards (CPU time, not wall time), where the shards have it. :meth:`get_attr` and
-:meth:`call` reach any other attribute, one result per shard.
+shards (CPU time, not wall time), where the shards have it. :meth:`get_attr`,
+:meth:`set_attr` and :meth:`call` reach any other attribute, one result per shard
+(``shard_starts`` says which copies each shard holds).
 
 Errors. Actions are checked here (shape, dtype, finite) with the messages of the
-vector env. A ``ValueError`` raised in a worker is raised again here with its message;
+vector env. A ``ValueError`` or ``AttributeError`` raised in a worker is raised again
+here with its message;
 any other exception becomes a ``RuntimeError`` carrying the worker's traceback. A worker
 that dies makes the next call raise ``RuntimeError``. Workers ignore SIGINT: Ctrl-C
 reaches the parent only, which can still close them (``fov-marl train`` saves its model
@@ -123,10 +125,16 @@ def make_vector_env(
     return SubprocVectorEnv(make, check_num_envs(num_envs), int(workers))
 
 
-def _error(exc: BaseException) -> tuple[str, str, str, bool]:
-    """What the parent needs to raise it again: name, message, traceback, and whether it
-    is a ``ValueError`` (``ConfigError`` included), raised again as ``ValueError``."""
-    return type(exc).__name__, str(exc), traceback.format_exc(), isinstance(exc, ValueError)
+#: worker exceptions the parent raises again as themselves (with the worker's message)
+_RERAISED = (ValueError, AttributeError)
+
+
+def _error(exc: BaseException) -> tuple[str, str, str, int]:
+    """What the parent needs to raise it again: name, message, traceback, and the index
+    in ``_RERAISED`` of the class it is raised again as (``ConfigError`` is a
+    ``ValueError``; an unknown attribute stays an ``AttributeError``), or -1."""
+    kind = next((k for k, cls in enumerate(_RERAISED) if isinstance(exc, cls)), -1)
+    return type(exc).__name__, str(exc), traceback.format_exc(), kind
 
 
 def _worker(conn: Any, make_vector: Callable[[int], Any], num_envs: int) -> None:
@@ -360,10 +368,10 @@ class SubprocVectorEnv:
                 results.append(None)
                 continue
             if status == "error" and error is None:
-                name, msg, tb, is_value_error = payload
+                name, msg, tb, kind = payload
                 error = (
-                    ValueError(msg)
-                    if is_value_error
+                    _RERAISED[kind](msg)
+                    if kind >= 0
                     else RuntimeError(f"worker {w} raised {name}: {msg}\n{tb}")
                 )
             results.append(payload)
@@ -450,6 +458,21 @@ class SubprocVectorEnv:
         if not isinstance(name, str):
             raise ValueError(f"name must be a str, got {describe(name)}")
         return self._all("get", name)
+
+    def set_attr(self, name: str, value: Any) -> None:
+        """Set attribute ``name`` of every shard's vector env to ``value``."""
+        if not isinstance(name, str):
+            raise ValueError(f"name must be a str, got {describe(name)}")
+        if name == "max_cycles":  # validated here, once, before any shard sees it
+            self.max_cycles = value
+            return
+        self._all("set", (name, value))
+
+    @property
+    def shard_starts(self) -> tuple[int, ...]:
+        """``(W + 1,)`` first copy of each shard, then B: shard w holds copies
+        ``[shard_starts[w], shard_starts[w + 1])``."""
+        return tuple(int(k) for k in self._starts)
 
     def call(self, name: str, *args: Any, **kwargs: Any) -> list[Any]:
         """``shard_env.name(*args, **kwargs)`` in every shard, one result per shard."""

@@ -395,7 +395,10 @@ class VectorEnvVecEnv(VecEnv):
 
     Attribute access acts on the one vector env: ``get_attr`` returns its attribute
     once per slot, ``set_attr`` sets it (e.g. ``max_cycles``), ``env_method`` calls it
-    once and repeats the result per slot; ``env_is_wrapped(cls)`` is True where the vector
+    once and repeats the result per slot. Over a :class:`~fov_marl.envs.SubprocVectorEnv`
+    an attribute or method the parent does not hold (e.g. ``eta_method`` of the
+    shards' envs) is reached in the shards: each slot gets its shard's value or result,
+    and ``set_attr`` sets it in every shard; ``env_is_wrapped(cls)`` is True where the vector
     env stands for a per-copy wrapper ``cls`` (its ``per_copy_wrappers``: the
     :class:`~fov_marl.wrappers.VectorSafetyFilterWrapper`, in one process or in the shards
     of a :class:`~fov_marl.envs.SubprocVectorEnv`, for ``SafetyFilterWrapper``), as on the
@@ -540,21 +543,43 @@ class VectorEnvVecEnv(VecEnv):
                 raise ValueError(f"slot index must be in [0, {self.num_envs - 1}], got {s}")
         return slots
 
+    def _in_shards(self, name: str) -> bool:
+        """True when ``name`` lives only in the shards of a ``SubprocVectorEnv``."""
+        return hasattr(self.venv, "shard_starts") and not hasattr(self.venv, name)
+
+    def _per_slot(self, per_shard: list[Any], slots: list[int]) -> list[Any]:
+        """Each slot's value from one value per shard."""
+        starts = np.asarray(self.venv.shard_starts)
+        copies = np.asarray(slots, dtype=np.int64) // self.n_agents
+        shard = np.searchsorted(starts, copies, side="right") - 1
+        return [per_shard[w] for w in shard.tolist()]
+
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
-        """The vector env's attribute, once per slot of ``indices``."""
+        """The vector env's attribute, once per slot of ``indices`` (the slot's shard's
+        over a ``SubprocVectorEnv`` where the parent does not hold it)."""
+        slots = self._slots(indices)
+        if self._in_shards(attr_name):
+            return self._per_slot(self.venv.get_attr(attr_name), slots)
         value = getattr(self.venv, attr_name)
-        return [value for _ in self._slots(indices)]
+        return [value for _ in slots]
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
-        """Set the attribute on the vector env (shared by all copies, whatever ``indices``)."""
+        """Set the attribute on the vector env (shared by all copies, whatever ``indices``;
+        in every shard over a ``SubprocVectorEnv`` where the parent does not hold it)."""
         self._slots(indices)
-        setattr(self.venv, attr_name, value)
+        if self._in_shards(attr_name):
+            self.venv.set_attr(attr_name, value)
+        else:
+            setattr(self.venv, attr_name, value)
 
     def env_method(
         self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs
     ) -> list[Any]:
-        """Call the vector env's method once; each slot of ``indices`` gets the result."""
+        """Call the vector env's method once; each slot of ``indices`` gets the result
+        (its shard's, over a ``SubprocVectorEnv`` where the parent lacks the method)."""
         slots = self._slots(indices)
+        if self._in_shards(method_name):
+            return self._per_slot(self.venv.call(method_name, *method_args, **method_kwargs), slots)
         result = getattr(self.venv, method_name)(*method_args, **method_kwargs)
         return [result for _ in slots]
 

@@ -12,6 +12,8 @@ from hypothesis import strategies as st
 from fov_marl.config import make_config
 from fov_marl.control import ControllerParams
 from fov_marl.control.coverage import (
+    MAX_LLOYD_STENCIL,
+    check_lloyd_stencil,
     coverage_centroid_reference,
     coverage_centroids,
     coverage_desired_input,
@@ -19,7 +21,9 @@ from fov_marl.control.coverage import (
     crossing_desired_input,
     facing_omega,
     lloyd_deadband_scale,
+    lloyd_radius_m,
     lloyd_stencil,
+    lloyd_stencil_size,
 )
 from fov_marl.geometry import rotation, world_to_body
 
@@ -172,3 +176,87 @@ def test_lloyd_dead_band_is_continuous_and_zero_near_the_centroid():
     np.testing.assert_array_equal(
         lloyd_deadband_scale(d, ControllerParams(lloyd_deadband_m=0.0)), 1.0
     )
+
+
+# ------------------------------------------------------------ stencil size and range
+def _stencil_reference(radius_m: float, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """Obviously-correct stencil: every candidate cell supersampled 16 × 16."""
+    n = int(math.ceil(radius_m / h)) + 1
+    ax = h * np.arange(-n, n + 1)
+    off = np.stack([g.ravel() for g in np.meshgrid(ax, ax, indexing="ij")], -1)
+    off = off[np.hypot(off[:, 0], off[:, 1]) <= radius_m + h]
+    sub = (np.arange(16) + 0.5) / 16 - 0.5
+    sub = h * np.stack([g.ravel() for g in np.meshgrid(sub, sub, indexing="ij")], -1)
+    pts = off[:, None, :] + sub[None]
+    frac = np.mean(np.hypot(pts[..., 0], pts[..., 1]) <= radius_m, axis=1)
+    return off[frac > 0], frac[frac > 0]
+
+
+@given(radius=st.floats(0.01, 12.0), h=st.floats(0.1, 2.0))
+def test_stencil_supersamples_only_the_rim_with_the_same_result(radius, h):
+    """Interior cells get fraction 1 without supersampling: bit-identical to the reference."""
+    off, frac = lloyd_stencil(radius, h)
+    ref_off, ref_frac = _stencil_reference(radius, h)
+    np.testing.assert_array_equal(off, ref_off)
+    np.testing.assert_array_equal(frac, ref_frac)
+
+
+def test_sensing_radius_beyond_the_arena_is_global_lloyd_at_bounded_cost():
+    """Red team 3: R_s = 1000 m in the 40 m arena needed a 75 GiB stencil (MemoryError).
+
+    The stencil radius is capped at √2 L + 2h, where a larger disk gives the same cell:
+    the centroid matches the exact reference (whose disk is 1000 m) and equals the one
+    of a config whose R_s is exactly at the cap.
+    """
+    big = make_config(sensing_radius_m=1000.0)
+    h = PRM.lloyd_grid_m
+    assert lloyd_radius_m(big, h) == pytest.approx(math.sqrt(2) * L + 2 * h)
+    assert lloyd_radius_m(CFG, h) == CFG.sensing_radius_m  # the paper's R_s: uncapped
+    at_cap = make_config(sensing_radius_m=lloyd_radius_m(big, h))
+    rng = np.random.default_rng(3)
+    for _ in range(6):
+        p = rng.uniform(0.5, L - 0.5, 2)
+        nb = rng.uniform(0.5, L - 0.5, (int(rng.integers(0, 6)), 2))
+        c, m = coverage_centroids(p[None], nb[None], None, big, PRM)
+        c_cap, m_cap = coverage_centroids(p[None], nb[None], None, at_cap, PRM)
+        cr, mr = coverage_centroid_reference(p, nb, big)
+        np.testing.assert_allclose(c[0], c_cap[0], atol=1e-9)
+        assert np.hypot(*(c[0] - cr)) < 0.1 and abs(m[0] - mr) < 0.02 * mr + 1e-4
+    # a corner robot still sees the whole arena: its lone cell is not cut by the cap
+    corner = np.array([0.5, 0.5])
+    c, m = coverage_centroids(corner[None], np.zeros((1, 0, 2)), None, big, PRM)
+    np.testing.assert_allclose(
+        m[0], coverage_centroid_reference(corner, np.zeros((0, 2)), big)[1], rtol=1e-3
+    )
+
+
+def test_lloyd_stencil_budget_names_the_field_at_construction():
+    """A stencil over MAX_LLOYD_STENCIL points is a ValueError naming sensing_radius_m
+    (and the knob that fixes it) when the controller is built, not a MemoryError mid-run."""
+    from fov_marl.control import FovCbfController
+    from fov_marl.control.batched import BatchedFovCbfController
+
+    cfg = make_config(arena_size_m=400.0, sensing_radius_m=150.0)
+    assert lloyd_stencil_size(lloyd_radius_m(cfg, 0.4), 0.4) > MAX_LLOYD_STENCIL
+    for build in (FovCbfController, BatchedFovCbfController):
+        with pytest.raises(ValueError, match=r"^sensing_radius_m = 150\.0 .*lloyd_grid_m"):
+            build(cfg, PRM)
+    with pytest.raises(ValueError, match="sensing_radius_m"):
+        lloyd_stencil(150.0, 0.4)
+    # the fix the message names works: a coarser grid fits
+    FovCbfController(cfg, ControllerParams(lloyd_grid_m=1.0))
+    check_lloyd_stencil(make_config(sensing_radius_m=3000.0), PRM)  # capped by the arena
+    # crossing never builds a Lloyd stencil
+    FovCbfController(make_config(scenario="crossing", arena_size_m=400.0, sensing_radius_m=1e6))
+
+
+@pytest.mark.parametrize("sigma", [0.1, 0.15, 0.2])
+def test_narrow_density_gives_finite_centroids(sigma):
+    """Red team 3: σ ≤ 0.2 m gave NaN centroids (0 · exp overflow at points outside the
+    cell lying far above the cell's maximum of log φ). The cell x ≥ 25.6 m is 5.6 m
+    from q_m = (20, 20); its centroid is its point nearest q_m, on the bisector."""
+    cfg = make_config(density_sigma_m=sigma)
+    p, nb = np.array([[26.1, 20.0]]), np.array([[[25.1, 20.0]]])
+    c, m = coverage_centroids(p, nb, None, cfg, PRM)
+    assert np.all(np.isfinite(c)) and np.isfinite(m[0]) and m[0] >= 0.0
+    np.testing.assert_allclose(c[0], [25.6 + 0.1, 20.0], atol=0.15)  # within the ramp h/2

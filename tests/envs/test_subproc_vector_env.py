@@ -240,8 +240,10 @@ def test_bad_arguments_and_worker_failures_raise_clear_errors():
             sub.reset(seed=[0, 1, -1])
         np.testing.assert_array_equal(sub.num_steps, steps_before)
         # an error inside a worker: raised here, and the shard keeps serving
-        with pytest.raises(RuntimeError, match="AttributeError"):
+        with pytest.raises(AttributeError, match="no_such_method"):  # as SB3 expects
             sub.call("no_such_method")
+        with pytest.raises(RuntimeError, match="TypeError"):  # others carry the traceback
+            sub.call("state", 1, 2)
         sub.step(np.zeros((3, N, 3)))
         # a worker that dies: the next call says so
         os.kill(sub._procs[1].pid, signal.SIGKILL)

@@ -553,8 +553,10 @@ def test_ppo_on_the_vector_adapter_equals_ppo_on_the_parallel_adapter():
 
 def test_training_vec_env_with_workers_equals_one_process_slot_by_slot():
     """``workers=2`` (SubprocVectorEnv shards, behind the filter) gives the one-process
-    adapter's observations, rewards, dones and infos bit for bit, across auto-resets; ``set_attr("max_cycles")`` reaches the envs behind
-    the filter; the per-copy path and ``workers > n_envs`` are refused."""
+    adapter's observations, rewards, dones and infos bit for bit, across auto-resets;
+    ``set_attr("max_cycles")`` reaches the envs behind the filter, attributes and
+    methods only the shards hold are reached per shard; the per-copy path and
+    ``workers > n_envs`` are refused."""
     from fov_marl.envs import SubprocVectorEnv
     from fov_marl.training.trainer import build_env, make_training_vec_env
 
@@ -587,6 +589,17 @@ def test_training_vec_env_with_workers_equals_one_process_slot_by_slot():
             dones += int(da.sum())
         assert dones >= 2 * one.num_envs
         assert two.get_attr("max_cycles") == [6] * two.num_envs
+        # attributes and methods only the shards hold (red team 3: AttributeError)
+        assert two.get_attr("eta_method") == one.get_attr("eta_method") == ["exact"] * 3 * N
+        assert two.venv.shard_starts == (0, 2, 3)
+        sh = two.env_method("reset_safety_infos", indices=[0, 2 * N])
+        ref = one.env_method("reset_safety_infos", indices=[0, 2 * N])
+        assert sh[0]["intervened"].shape == (2, N)  # shard 0 holds copies 0 and 1
+        assert sh[1]["intervened"].shape == (1, N)  # shard 1 holds copy 2
+        assert ref[0]["intervened"].shape == (3, N)
+        two.set_attr("eta_method", "exact")  # set in every shard
+        with pytest.raises(AttributeError):
+            two.get_attr("no_such_attribute")
         for adapter in (one, two):
             adapter.set_attr("max_cycles", 2)
             adapter.reset()
