@@ -225,7 +225,13 @@ def ellipse_distance(
             f = qa * qa + qb * qb - 1.0
             df = -2.0 * (qa * qa / (t + a2) + qb * qb / (t + b2))
             step = np.where(df < 0.0, f / df, 0.0)
-            t = np.minimum(np.maximum(t - step, lo), hi)
+            t_next = np.minimum(np.maximum(t - step, lo), hi)
+            # an iteration that moves no t is a fixed point: the remaining ones would
+            # return these same numbers, so stopping here is bit-identical (NaN ≠ NaN
+            # keeps a NaN input iterating, as before)
+            if np.array_equal(t_next, t):
+                break
+            t = t_next
     x = a2 * u / (t + a2)
     y = b2 * v / (t + b2)
     d = np.hypot(u - x, v - y)
