@@ -38,7 +38,10 @@ and a wrong shape raise ``ValueError`` naming the agent.
 
 Keywords are :class:`fov_marl.config.ScenarioConfig` fields, validated as in the coverage
 env. The crossing checks tie ``crossing_radius_m`` (at most ``arena_size_m / 2 -
-robot_radius_m``) and ``crossing_jitter_m`` (at most ``arena_size_m / 2``) to the arena;
+robot_radius_m``) and ``crossing_jitter_m`` (at most ``arena_size_m / 2``) to the arena,
+and the ring to the team: no jitter draw may put two starts (or two targets) closer than
+two radii, ``2 R sin(π/N) − 2√2 crossing_jitter_m ≥ 2 robot_radius_m`` (at the defaults:
+N ≤ 31; a larger team needs a larger ``crossing_radius_m`` or arena);
 coverage-only fields (``density_mean_m``, ``eta_grid_m``, ...) are type-checked but do
 not constrain this scenario. ``scenario="crossing"`` is accepted; another scenario is an
 error.
