@@ -454,7 +454,7 @@ class ScenarioConfig:
             i, j = np.unravel_index(np.argmin(d), d.shape)
             if d[i, j] < 2 * r:
                 raise ConfigError(
-                    f"initial_poses: robots {min(i, j)} and {max(i, j)} are {d[i, j]:.3f} m "
+                    f"initial_poses: robots {min(i, j)} and {max(i, j)} are {d[i, j]!r} m "
                     f"apart; must be >= 2 * robot_radius_m = {2 * r} m"
                 )
         arr = arr.copy()

@@ -42,7 +42,10 @@ code  status                 meaning (:class:`~fov_marl.control.ControlResult`)
 5     ``invalid_input``      non-finite input, u = 0
 6     ``qp_failed``          a hard level is infeasible, u = 0
 7     ``safety_fallback``    the collision rows cannot all be met: safe fallback
-8     ``no_neighbours``      a one-robot team: nothing to filter
+8     ``no_neighbours``      nothing to solve: a one-robot team without wall rows
+                             (``walls=False`` or ``safety_model="mean"``); with
+                             the defaults a lone robot is filtered against the
+                             walls and reports the statuses above
 ====  =====================  ====================================================
 
 Reading infos

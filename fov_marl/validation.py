@@ -50,7 +50,9 @@ __all__ = [
     "check_keys",
     "check_seed",
     "check_budget",
+    "fov_parallel_base",
     "as_real_vector",
+    "holds_bool",
     "check_out_dir",
     "check_out_file",
     "check_params",
@@ -341,6 +343,27 @@ def check_params(
     return cls(**{**base, **value})
 
 
+def fov_parallel_base(name: str, env: Any, vector_hint: str = "") -> Any:
+    """The fov_marl ParallelEnv under ``env`` (``env.unwrapped``), or a ``ValueError``.
+
+    For wrappers that take one ParallelEnv (``name`` for the message): a vector env (it
+    has ``num_envs``) and anything without ``.config`` and ``.poses`` are refused, naming
+    what was given; ``vector_hint`` ends the vector env's message (what to use instead).
+    """
+    base = getattr(env, "unwrapped", None)
+    if hasattr(env, "num_envs") or hasattr(base, "num_envs"):
+        raise ValueError(
+            f"{name} wraps one fov_marl ParallelEnv (parallel_env(...)), got the vector env "
+            f"{type(env).__name__}" + (f"; {vector_hint}" if vector_hint else "")
+        )
+    if base is None or not hasattr(base, "config") or not hasattr(base, "poses"):
+        raise ValueError(
+            f"{name} needs a fov_marl ParallelEnv (fov_coverage_v0.parallel_env(...) or "
+            f"fov_crossing_v0.parallel_env(...), possibly wrapped), got {describe(env)}"
+        )
+    return base
+
+
 def check_budget(
     name: str, value: Any, need: float, limit: float, what: str, unit: str, context: str = ""
 ) -> None:
@@ -385,7 +408,23 @@ def as_real_vector(name: str, value: Any, n: int) -> np.ndarray | str:
         return f"must be a ({n},) array of real numbers, got {kind}: {describe(value)}"
     if x.shape != (n,):
         return f"must have shape ({n},), got shape {x.shape}"
+    if holds_bool(value):
+        return f"must be a ({n},) array of real numbers, got a bool in {describe(value)}"
     return x.astype(np.float64, copy=False)
+
+
+def holds_bool(value: Any) -> bool:
+    """True when a list or tuple (nested) holds a ``bool`` / ``np.bool_`` element.
+
+    ``np.asarray([True, 0.5, 0])`` is a float array: the bools of a mixed sequence
+    would pass a dtype check. Arrays are not walked (their dtype says it).
+    """
+    if not isinstance(value, list | tuple):
+        return False
+    return any(
+        isinstance(e, bool | np.bool_) or (isinstance(e, list | tuple) and holds_bool(e))
+        for e in value
+    )
 
 
 # ------------------------------------------------------------------------ output paths

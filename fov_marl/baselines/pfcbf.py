@@ -219,16 +219,21 @@ class PipelinePolicy:
             draw_beliefs(canvas, self.pipeline, robots=(0,))
 
 
-@register_policy("pfcbf")
+#: what make_policy("pfcbf" / "lloyd-pf" / "ideal", env, **options) accepts: the
+#: PipelinePolicy keywords the factories leave free
+_PIPELINE_OPTIONS = ("init", "tracker_params", "controller_params", "controller", "adopt_applied")
+
+
+@register_policy("pfcbf", options=_PIPELINE_OPTIONS)
 def _make_pfcbf(env: Any, **kw: Any) -> PipelinePolicy:
     return PipelinePolicy(env, use_cbf=True, estimates="tracker", **kw)
 
 
-@register_policy("lloyd-pf")
+@register_policy("lloyd-pf", options=_PIPELINE_OPTIONS)
 def _make_lloyd_pf(env: Any, **kw: Any) -> PipelinePolicy:
     return PipelinePolicy(env, use_cbf=False, estimates="tracker", **kw)
 
 
-@register_policy("ideal")
+@register_policy("ideal", options=_PIPELINE_OPTIONS)
 def _make_ideal(env: Any, **kw: Any) -> PipelinePolicy:
     return PipelinePolicy(env, use_cbf=True, estimates="oracle", **kw)

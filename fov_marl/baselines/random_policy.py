@@ -30,7 +30,5 @@ class RandomPolicy:
 
 
 @register_policy("random")
-def _make_random(env: Any, **kwargs: Any) -> RandomPolicy:
-    if kwargs:
-        raise ValueError(f"policy 'random' takes no options, got {sorted(kwargs)}")
+def _make_random(env: Any) -> RandomPolicy:
     return RandomPolicy(env)

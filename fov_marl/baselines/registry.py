@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from typing import Any, Protocol, runtime_checkable
 
@@ -26,13 +27,37 @@ class Policy(Protocol):
 
 
 _REGISTRY: dict[str, Callable[..., Policy]] = {}
+#: the keyword options of each registered factory (None: not known, the factory checks)
+_OPTIONS: dict[str, tuple[str, ...] | None] = {}
 
 
-def register_policy(name: str) -> Callable[[Callable[..., Policy]], Callable[..., Policy]]:
-    """Decorator: register a policy factory ``factory(env, **kwargs)`` under ``name``."""
+def _keyword_options(fn: Callable[..., Any]) -> tuple[str, ...] | None:
+    """The keyword parameters of ``fn`` after its first (the env), or None when it takes
+    ``**kwargs`` (then only the factory knows what it accepts)."""
+    params = list(inspect.signature(fn).parameters.values())[1:]
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return None
+    return tuple(p.name for p in params if p.kind is not inspect.Parameter.VAR_POSITIONAL)
+
+
+def register_policy(
+    name: str, options: Callable[..., Any] | tuple[str, ...] | None = None
+) -> Callable[[Callable[..., Policy]], Callable[..., Policy]]:
+    """Decorator: register a policy factory ``factory(env, **kwargs)`` under ``name``.
+
+    ``options``: the keyword options :func:`make_policy` accepts for it, as names or as a
+    callable whose keyword parameters (after the env) they are, e.g. the class the
+    factory forwards ``**kwargs`` to. Default: the factory's own keyword parameters.
+    """
 
     def deco(factory: Callable[..., Policy]) -> Callable[..., Policy]:
         _REGISTRY[name] = factory
+        if options is None:
+            _OPTIONS[name] = _keyword_options(factory)
+        elif callable(options):
+            _OPTIONS[name] = _keyword_options(options)
+        else:
+            _OPTIONS[name] = tuple(options)
         return factory
 
     return deco
@@ -47,8 +72,16 @@ def make_policy(name: str, env: Any, **kwargs: Any) -> Policy:
     """Build the scripted policy ``name`` for ``env`` (a fov_marl ParallelEnv or wrapper).
 
     Raises:
-        ValueError: unknown name (the message lists the valid ones).
+        ValueError: unknown name or option (the message lists the valid ones).
     """
     if name not in _REGISTRY:
         raise ValueError(f"unknown policy {name!r}; available policies are {available_policies()}")
+    allowed = _OPTIONS.get(name)
+    if allowed is not None:
+        unknown = sorted(set(kwargs) - set(allowed))
+        if unknown:
+            raise ValueError(
+                f"unknown option(s) {unknown} for policy {name!r}; its options are "
+                f"{sorted(allowed) if allowed else 'none'}"
+            )
     return _REGISTRY[name](env, **kwargs)

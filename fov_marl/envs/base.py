@@ -17,6 +17,8 @@ from typing import Any
 import gymnasium
 import numpy as np
 from pettingzoo import ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from fov_marl.config import ScenarioConfig, make_config
 from fov_marl.envs.core import CORES, BatchedCore
@@ -25,7 +27,14 @@ from fov_marl.infos import agent_infos
 from fov_marl.spaces import ObservationLayout
 from fov_marl.validation import ConfigError, as_real_vector, check_int, check_seed, describe
 
-__all__ = ["MAX_CYCLES", "FovEnvBase", "scenario_config"]
+__all__ = [
+    "FORWARDED_MAX_CYCLES",
+    "MAX_CYCLES",
+    "FovAECEnv",
+    "FovEnvBase",
+    "aec_env",
+    "scenario_config",
+]
 
 
 def scenario_config(scenario: str, name: str, config_kwargs: dict[str, Any]) -> ScenarioConfig:
@@ -69,6 +78,32 @@ MAX_CYCLES = property(
 )
 
 
+#: ``max_cycles`` of a wrapper (``SafetyFilterWrapper``, ``BeliefObservationWrapper``):
+#: reads and sets the wrapped env's, so setting it on the wrapper truncates the episodes
+#: (a plain attribute of the wrapper would be silently ignored).
+FORWARDED_MAX_CYCLES = property(
+    lambda w: w.env.max_cycles,
+    lambda w, value: setattr(w.env, "max_cycles", value),
+    doc="The wrapped env's steps before truncation; setting it sets the wrapped env's.",
+)
+
+
+class FovAECEnv(OrderEnforcingWrapper):
+    """PettingZoo's AEC conversion of a fov_marl ParallelEnv (``parallel_to_aec``) whose
+    ``max_cycles`` reads and sets the ParallelEnv's."""
+
+    max_cycles = property(
+        lambda w: w.unwrapped.max_cycles,
+        lambda w, value: setattr(w.unwrapped, "max_cycles", value),
+        doc="Steps before truncation of the underlying ParallelEnv; settable.",
+    )
+
+
+def aec_env(parallel: ParallelEnv) -> FovAECEnv:
+    """The AEC version of ``parallel`` (PettingZoo's conversion, order enforced)."""
+    return FovAECEnv(parallel_to_aec_wrapper(parallel))
+
+
 class FovEnvBase(ParallelEnv):
     """Common implementation; use the scenario modules' ``parallel_env``.
 
@@ -99,6 +134,7 @@ class FovEnvBase(ParallelEnv):
         self.possible_agents = [f"robot_{i}" for i in range(n)]
         self.agent_name_mapping = {a: i for i, a in enumerate(self.possible_agents)}
         self.agents: list[str] = []
+        self._was_reset = False
         self.layouts = [ObservationLayout(n, i) for i in range(n)]
         self._core: BatchedCore = CORES[self.scenario](cfg, num_envs=1)
         self._obs_space = gymnasium.spaces.Box(
@@ -122,6 +158,17 @@ class FovEnvBase(ParallelEnv):
 
     def action_space(self, agent: str) -> gymnasium.spaces.Box:
         return self._act_spaces[self._check_agent(agent)]
+
+    @property
+    def observation_spaces(self) -> dict[str, gymnasium.spaces.Box]:
+        """``{agent: observation_space(agent)}`` (PettingZoo's attribute; a new dict of
+        the same space objects on each access, so editing it changes nothing)."""
+        return dict(self._obs_spaces)
+
+    @property
+    def action_spaces(self) -> dict[str, gymnasium.spaces.Box]:
+        """``{agent: action_space(agent)}`` (a new dict of the same space objects)."""
+        return dict(self._act_spaces)
 
     def _check_agent(self, agent: str) -> str:
         if agent not in self.agent_name_mapping:
@@ -152,6 +199,7 @@ class FovEnvBase(ParallelEnv):
             raise ValueError(f"options must be a dict or None, got {describe(options)}")
         obs, metrics = self._core.reset(np.zeros(1, dtype=np.int64), [seed])
         self.agents = list(self.possible_agents)
+        self._was_reset = True
         infos = self._agent_infos(metrics_row(metrics, 0))
         if self.render_mode == "human":
             self.render()
@@ -159,7 +207,11 @@ class FovEnvBase(ParallelEnv):
 
     def step(self, actions: dict[str, Any]):
         if not self.agents:
-            raise ValueError("step() called on a finished episode; call reset() first")
+            raise ValueError(
+                "step() called on a finished episode; call reset() first"
+                if self._was_reset
+                else "step() called before reset()"
+            )
         act = self._validate_actions(actions)
         obs, rew, term, metrics = self._core.step(act[None])
         terminate = bool(term[0])

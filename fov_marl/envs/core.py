@@ -24,6 +24,7 @@ dart throwing of :func:`~fov_marl.envs.world.sample_initial_poses` is per team).
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -106,7 +107,7 @@ class BatchedCore:
         L = self.config.arena_size_m
         diag = L * np.sqrt(2.0)
         cue_lo = np.array([0.0, 0.0, -1.0, -1.0, -diag, -diag, 0.0])
-        cue_hi = np.array([L, L, 1.0, 1.0, diag, diag, diag])
+        cue_hi = np.array([L, L, 1.0, 1.0, diag, diag, self._cue_scalar_high()])
         lo = np.concatenate([np.tile(slot_lo, n - 1), cue_lo]).astype(np.float32)
         hi = np.concatenate([np.tile(slot_hi, n - 1), cue_hi]).astype(np.float32)
         assert lo.size == SLOT_SIZE * (n - 1) + CUE_SIZE
@@ -141,6 +142,10 @@ class BatchedCore:
 
     def _cue_scalar(self, goal_body: np.ndarray) -> np.ndarray:
         raise NotImplementedError
+
+    def _cue_scalar_high(self) -> float:
+        """Upper bound of the cue's last entry (m): the arena diagonal by default."""
+        return self.config.arena_size_m * math.sqrt(2.0)
 
     def _rewards_and_metrics(
         self, idx: Any, col_i: np.ndarray, viol_i: np.ndarray, metrics: dict, reset: bool
@@ -359,6 +364,11 @@ class CoverageCore(BatchedCore):
 
     def _cue_scalar(self, goal_body: np.ndarray) -> np.ndarray:
         return np.full(goal_body.shape[:-1], self.config.density_sigma_m)
+
+    def _cue_scalar_high(self) -> float:
+        # σ may exceed the diagonal (a nearly flat density): the observation reports it
+        # as it is, like the state (the clip to the bounds must not change it)
+        return max(self.config.arena_size_m * math.sqrt(2.0), self.config.density_sigma_m)
 
     def _rewards_and_metrics(
         self, idx: Any, col_i: np.ndarray, viol_i: np.ndarray, metrics: dict, reset: bool

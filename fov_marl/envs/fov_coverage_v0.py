@@ -130,9 +130,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pettingzoo.utils.conversions import parallel_to_aec
-
-from fov_marl.envs.base import FovEnvBase
+from fov_marl.envs.base import FovAECEnv, FovEnvBase, aec_env
 from fov_marl.envs.subproc import SubprocVectorEnv, make_vector_env
 from fov_marl.envs.vector import FovVectorEnv
 
@@ -156,9 +154,10 @@ def parallel_env(render_mode: str | None = None, **config: Any) -> FovCoverageEn
     return FovCoverageEnv(render_mode=render_mode, **config)
 
 
-def env(render_mode: str | None = None, **config: Any):
-    """PettingZoo AEC version, through PettingZoo's ``parallel_to_aec`` conversion."""
-    return parallel_to_aec(parallel_env(render_mode=render_mode, **config))
+def env(render_mode: str | None = None, **config: Any) -> FovAECEnv:
+    """PettingZoo AEC version, through PettingZoo's ``parallel_to_aec`` conversion
+    (order enforced); ``max_cycles`` reads and sets the ParallelEnv's."""
+    return aec_env(parallel_env(render_mode=render_mode, **config))
 
 
 def vector_env(

@@ -25,7 +25,8 @@ attribute                   meaning
 Seeding. ``reset(seed=s)`` seeds copy k with ``s + k``: copy k is then bit-identical,
 observation by observation, reward by reward and metric by metric, to
 ``parallel_env(**config)`` after ``reset(seed=s + k)`` under the same actions (both are
-views of one implementation, :mod:`fov_marl.envs.core`). ``reset()`` without a seed
+views of one implementation, :mod:`fov_marl.envs.core`); the rewards are float32 here,
+the ParallelEnv's float64 rewards rounded. ``reset()`` without a seed
 continues every copy's generator, like the ParallelEnv's.
 
 Autoreset: SAME-STEP, as SB3 and Gymnasium's ``AutoresetMode.SAME_STEP``. When copy k
@@ -66,7 +67,7 @@ import numpy as np
 from fov_marl.config import ScenarioConfig
 from fov_marl.envs.base import MAX_CYCLES, scenario_config
 from fov_marl.envs.core import CORES, BatchedCore
-from fov_marl.validation import check_seed, describe
+from fov_marl.validation import check_seed, describe, holds_bool
 
 __all__ = ["FovVectorEnv", "check_num_envs", "check_vector_actions", "vector_seeds"]
 
@@ -119,6 +120,8 @@ def check_vector_actions(actions: Any, num_envs: int, n_agents: int) -> np.ndarr
         raise ValueError(
             f"actions must have shape (num_envs, n_agents, 3) = {shape}, got {a.shape}"
         )
+    if holds_bool(actions):
+        raise ValueError(f"actions must be a real array of shape {shape}, got a bool in a list")
     a = a.astype(np.float64, copy=False)
     if not np.isfinite(a).all():
         k, i = np.argwhere(~np.isfinite(a).all(axis=-1))[0]

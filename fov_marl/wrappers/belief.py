@@ -80,10 +80,17 @@ import gymnasium
 import numpy as np
 from pettingzoo.utils.wrappers import BaseParallelWrapper
 
+from fov_marl.envs.base import FORWARDED_MAX_CYCLES
 from fov_marl.estimation import TrackerBank
 from fov_marl.estimation.params import TrackerParams
 from fov_marl.geometry import chi2_2dof
-from fov_marl.validation import ConfigError, check_keys, check_real, describe
+from fov_marl.validation import (
+    ConfigError,
+    check_keys,
+    check_real,
+    describe,
+    fov_parallel_base,
+)
 
 __all__ = [
     "FEATURE_NAMES",
@@ -145,7 +152,7 @@ class BeliefFeaturizer:
             raise ValueError("set the initialisation with init=, not tracker_params['init_mode']")
         check_keys("tracker_params fields", params, TrackerParams.__dataclass_fields__)
         self.env = env
-        self.config = env.unwrapped.config
+        self.config = fov_parallel_base("BeliefObservationWrapper", env).config
         self.init = init
         self.time_cap_s = cap
         self.tracker_params = TrackerParams(**params, init_mode=init)
@@ -262,6 +269,13 @@ class BeliefObservationWrapper(BaseParallelWrapper):
         )
         self._obs_spaces = {a: space for a in env.possible_agents}
         self.base_obs_size = int(base.shape[0])
+
+    max_cycles = FORWARDED_MAX_CYCLES
+
+    @property
+    def observation_spaces(self) -> dict[str, gymnasium.spaces.Box]:
+        """``{agent: observation_space(agent)}``: the belief-augmented spaces."""
+        return dict(self._obs_spaces)
 
     def observation_space(self, agent: str) -> gymnasium.spaces.Box:
         if agent not in self._obs_spaces:

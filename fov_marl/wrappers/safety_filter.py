@@ -140,12 +140,13 @@ import numpy as np
 from pettingzoo.utils.wrappers import BaseParallelWrapper
 
 from fov_marl.control import ControllerParams
+from fov_marl.envs.base import FORWARDED_MAX_CYCLES
 from fov_marl.envs.rendering import draw_beliefs
 from fov_marl.estimation import TrackerParams
 from fov_marl.infos import reset_safety_infos, set_safety_infos
 from fov_marl.pipeline import PfCbfPipeline
 from fov_marl.spaces import action_to_velocity
-from fov_marl.validation import check_int, check_params
+from fov_marl.validation import check_int, check_params, fov_parallel_base
 
 
 class FilteredActions(NamedTuple):
@@ -321,13 +322,10 @@ class SafetyFilterWrapper(BaseParallelWrapper):
         draw_robot: int | None = 0,
         controller: str = "auto",
     ) -> None:
+        base = fov_parallel_base(
+            "SafetyFilterWrapper", env, "for B copies use VectorSafetyFilterWrapper"
+        )
         super().__init__(env)
-        base = env.unwrapped
-        if not hasattr(base, "config") or not hasattr(base, "poses"):
-            raise ValueError(
-                "SafetyFilterWrapper needs a fov_marl environment (with .config and .poses), "
-                f"got {type(base).__name__}"
-            )
         tracker_params = check_params(
             "tracker_params", tracker_params, TrackerParams, FILTER_TRACKER_DEFAULTS
         )
@@ -346,8 +344,11 @@ class SafetyFilterWrapper(BaseParallelWrapper):
         self.draw_robot = draw_robot
         self._seed_rng = np.random.default_rng()
         self._ready = False
+        self._was_reset = False
         self._last_actions: FilteredActions | None = None
         self.last_cpu_s = 0.0
+
+    max_cycles = FORWARDED_MAX_CYCLES
 
     @property
     def last_actions(self) -> FilteredActions | None:
@@ -370,13 +371,18 @@ class SafetyFilterWrapper(BaseParallelWrapper):
         filter_seed = int(self._seed_rng.integers(2**63)) if seed is None else seed
         self.pipeline.reset(obs, seed=filter_seed, initial_poses_world=self.env.unwrapped.poses)
         self._ready = True
+        self._was_reset = True
         self._last_actions = None
         reset_safety_infos(infos)
         return obs, infos
 
     def step(self, actions: dict[str, Any]):
         if not self._ready:
-            raise ValueError("step() called before reset()")
+            raise ValueError(
+                "step() called on a finished episode; call reset() first"
+                if self._was_reset
+                else "step() called before reset()"
+            )
         base = self.env.unwrapped
         # validate exactly as the env does (shape, NaN, unknown/missing agents)
         act = base._validate_actions(actions)

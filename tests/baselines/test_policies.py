@@ -18,6 +18,24 @@ def test_registry_lists_the_four_baselines_and_rejects_unknown_names():
         make_policy("teleport", env)
 
 
+@pytest.mark.parametrize(
+    ("name", "bad", "listed"),
+    [
+        ("pfcbf", {"foo": 1}, "controller_params"),
+        ("lloyd-pf", {"foo": 1}, "tracker_params"),
+        ("ideal", {"use_cbf": False}, "init"),  # fixed by the factory: not an option
+        ("learned", {"init": "uniform"}, "path"),
+        ("random", {"x": 1}, "none"),
+    ],
+)
+def test_unknown_policy_options_are_value_errors_listing_the_valid_ones(name, bad, listed):
+    """Red team 4: pfcbf/ideal/lloyd-pf/learned raised TypeError for an unknown option."""
+    env = fov_coverage_v0.parallel_env(n_agents=3)
+    with pytest.raises(ValueError, match=rf"unknown option\(s\) \['{next(iter(bad))}'\].*{listed}"):
+        make_policy(name, env, **bad)
+    make_policy("pfcbf", env, init="uniform", controller="batched")  # valid options pass
+
+
 @pytest.mark.parametrize("name", ["pfcbf", "lloyd-pf", "ideal", "random"])
 def test_policies_are_deterministic_under_a_seed(name):
     kw = dict(n_agents=4, max_steps=60, record_trajectory=True)

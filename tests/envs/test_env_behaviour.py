@@ -118,6 +118,17 @@ def test_observations_and_state_always_inside_their_box(seed, n, fov):
             obs, *_ = env.step({a: rng.uniform(-3, 3, 3) for a in env.agents})
 
 
+@pytest.mark.parametrize("sigma", [2.8, 56.0, 60.0, 1e6])
+def test_density_sigma_in_the_cue_is_reported_as_configured(sigma):
+    """Red team 4: σ above the arena diagonal (56.57 m) was clipped to it in the cue while
+    the state reported it: the bound of that entry is max(diagonal, σ)."""
+    env = fov_coverage_v0.parallel_env(n_agents=2, density_sigma_m=sigma)
+    obs, _ = env.reset(seed=0)
+    for a, o in obs.items():
+        assert o[-1] == np.float32(sigma) == env.state()[-1]
+        assert env.observation_space(a).contains(o)
+
+
 def test_kinematics_exact_integration_and_speed_limit():
     env = fov_coverage_v0.parallel_env(
         n_agents=1, initial_poses=[[20.0, 20.0, 0.5]], dt_s=0.2, v_max_mps=1.0, omega_max_radps=1.0

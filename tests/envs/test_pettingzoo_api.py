@@ -79,3 +79,73 @@ def test_spaces_are_cached_objects(mod):
     assert env.action_space(a).shape == (3,)
     assert env.observation_space(a).shape == (5 * (env.config.n_agents - 1) + 7,)
     assert np.all(env.action_space(a).low == -1) and np.all(env.action_space(a).high == 1)
+
+
+@pytest.mark.parametrize("mod", MODULES, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
+def test_space_dicts_are_pettingzoo_attributes(mod):
+    """``observation_spaces`` / ``action_spaces`` (PettingZoo's documented attributes):
+    the spaces of the methods, in a dict whose edits change nothing; the belief wrapper
+    gives its augmented spaces, the filter forwards the env's."""
+    from fov_marl.wrappers import BeliefObservationWrapper, SafetyFilterWrapper
+
+    env = mod.parallel_env(n_agents=3)
+    for a in env.possible_agents:
+        assert env.observation_spaces[a] is env.observation_space(a)
+        assert env.action_spaces[a] is env.action_space(a)
+    env.observation_spaces.clear()
+    assert set(env.observation_spaces) == set(env.possible_agents)
+    filt = SafetyFilterWrapper(mod.parallel_env(n_agents=3))
+    assert filt.observation_spaces["robot_0"].shape == env.observation_space("robot_0").shape
+    bel = BeliefObservationWrapper(mod.parallel_env(n_agents=3))
+    assert bel.observation_spaces["robot_0"] is bel.observation_space("robot_0")
+    assert bel.observation_spaces["robot_0"].shape != env.observation_space("robot_0").shape
+
+
+def _episode_length(env, limit: int = 50) -> int:
+    env.reset(seed=0)
+    steps = 0
+    while env.agents and steps < limit:
+        env.step({a: np.zeros(3, np.float32) for a in env.agents})
+        steps += 1
+    return steps
+
+
+@pytest.mark.parametrize("mod", MODULES, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
+def test_max_cycles_set_on_a_wrapper_or_the_aec_env_truncates(mod):
+    """Red team 4: ``max_cycles`` set on SafetyFilterWrapper, BeliefObservationWrapper or
+    the AEC env was stored on the wrapper and ignored (episodes ran on to 1000)."""
+    from fov_marl.wrappers import BeliefObservationWrapper, SafetyFilterWrapper
+
+    filt = SafetyFilterWrapper(mod.parallel_env(n_agents=2))
+    bel = BeliefObservationWrapper(SafetyFilterWrapper(mod.parallel_env(n_agents=2)))
+    for wrapped in (filt, bel):
+        wrapped.max_cycles = 3
+        assert wrapped.unwrapped.max_cycles == 3 == wrapped.max_cycles
+        assert _episode_length(wrapped) == 3
+        with pytest.raises(ValueError, match="max_cycles"):
+            wrapped.max_cycles = 0
+    aec = mod.env(n_agents=2)
+    aec.max_cycles = 3
+    assert aec.unwrapped.max_cycles == 3
+    aec.reset(seed=0)
+    turns = 0
+    for _ in aec.agent_iter(100):
+        *_, term, trunc, _ = aec.last()
+        aec.step(None if term or trunc else np.zeros(3, np.float32))
+        turns += 1
+    assert turns == 3 * 2 + 2  # 3 steps of 2 agents, then each agent's final turn
+    with pytest.raises(ValueError, match="max_cycles"):
+        aec.max_cycles = 1.5
+
+
+@pytest.mark.parametrize("mod", MODULES, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
+def test_step_messages_say_before_reset_or_finished(mod):
+    from fov_marl.wrappers import SafetyFilterWrapper
+
+    for env in (mod.parallel_env(n_agents=2, max_cycles=1),
+                SafetyFilterWrapper(mod.parallel_env(n_agents=2, max_cycles=1))):  # fmt: skip
+        with pytest.raises(ValueError, match=r"before reset\(\)"):
+            env.step({})
+        assert _episode_length(env) == 1
+        with pytest.raises(ValueError, match="finished episode"):
+            env.step({a: np.zeros(3) for a in env.possible_agents})

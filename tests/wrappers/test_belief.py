@@ -223,6 +223,10 @@ def test_invalid_arguments():
         BeliefObservationWrapper(_env(), tracker_params={"init_mode": "uniform"})
     with pytest.raises(ValueError, match="before reset"):
         BeliefFeaturizer(_env()).features()
+    with pytest.raises(ValueError, match="needs a fov_marl ParallelEnv"):
+        BeliefObservationWrapper(object())  # red team 4: an AttributeError
+    with pytest.raises(ValueError, match="got the vector env"):
+        BeliefObservationWrapper(fov_coverage_v0.vector_env(num_envs=2, n_agents=2))
 
 
 def test_behind_the_safety_filter():

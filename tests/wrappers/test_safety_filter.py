@@ -70,8 +70,12 @@ def test_wrapper_validates_actions_like_the_env():
         env.step({**good, "robot_1": np.array([np.nan, 0.0, 0.0])})
     with pytest.raises(ValueError, match="robot_2"):
         env.step({**good, "robot_2": np.zeros(4)})
-    with pytest.raises(ValueError, match="fov_marl environment"):
+    with pytest.raises(ValueError, match="needs a fov_marl ParallelEnv"):
         SafetyFilterWrapper(object.__new__(type("Fake", (), {"unwrapped": property(lambda s: s)})))
+    with pytest.raises(ValueError, match="needs a fov_marl ParallelEnv"):
+        SafetyFilterWrapper(object())  # red team 4: an AttributeError on .unwrapped
+    with pytest.raises(ValueError, match="got the vector env FovVectorEnv.*VectorSafety"):
+        SafetyFilterWrapper(fov_coverage_v0.vector_env(num_envs=2, n_agents=2))
 
 
 def test_wrapper_is_deterministic_under_a_seed():
