@@ -30,7 +30,6 @@ traceback for user mistakes too. Ctrl-C exits with status 130 without a tracebac
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import sys
@@ -39,15 +38,15 @@ from pathlib import Path
 from typing import Any
 
 from fov_marl.filter_options import add_filter_arguments, filter_kwargs
+from fov_marl.jsonio import json_text, write_json
 from fov_marl.tables import format_table
-from fov_marl.validation import check_out_dir, check_out_file
+from fov_marl.validation import MAX_SEED, check_out_dir, check_out_file, check_writable
 
 __all__ = ["main", "build_parser", "format_table", "CliError"]
 
 _PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
 
 #: --seed range: every consumer (NumPy, stable-baselines3's np.random.seed) takes it
-MAX_SEED = 2**31 - 1
 #: render keeps its frames in memory (640 x 640 x 3 bytes each): at most this many
 MAX_RENDER_FRAMES = 1000
 
@@ -299,6 +298,8 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     loaded = _check_policy(args)
     env_kwargs = _check_config(args, loaded)
     sf_kwargs = _filter_kwargs(args, loaded)
+    if out_dir is not None:  # the last check: before the episodes, not after them
+        check_writable("--out", [out_dir / "results.json"])
     records = run_episodes(
         args.scenario,
         args.policy,
@@ -329,7 +330,7 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     print(format_table(srows, ("metric", "mean", "std", "ci95_lo", "ci95_hi", "n")))
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / "results.json").write_text(json.dumps(out, indent=2))
+        write_json(out_dir / "results.json", out, indent=2)
         if not args.quiet:
             print(f"\nwrote {out_dir / 'results.json'}")
     return out
@@ -385,7 +386,7 @@ def run_bench(args: argparse.Namespace) -> list[dict[str, Any]]:
 
     rows = run_benchmarks(quick=args.quick, n_agents=args.n_agents, ppo=args.ppo)
     if args.json:
-        print(json.dumps(rows, indent=2))
+        print(json_text(rows, indent=2))
     else:
         for section in dict.fromkeys(r["section"] for r in rows):
             sub = [r for r in rows if r["section"] == section]
@@ -397,9 +398,11 @@ def run_bench(args: argparse.Namespace) -> list[dict[str, Any]]:
 
 # ---------------------------------------------------------------- reproduce
 def run_reproduce(args: argparse.Namespace) -> Path:
-    from fov_marl.report import reproduce
+    from fov_marl.report import OUTPUT_FILES, reproduce
 
     out = check_out_dir("--out", args.out)
+    check_out_dir("--out", out / "cache")  # the run cache is a folder inside it
+    check_writable("--out", [out / name for name in OUTPUT_FILES])
     _check_backend(args)
     path = reproduce(
         out,

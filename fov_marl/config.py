@@ -557,12 +557,16 @@ def _centre_density(kwargs: dict[str, Any], old_arena: float, old_mean: tuple) -
 _DEFAULT = ScenarioConfig()
 
 
-def read_config_file(path: str | os.PathLike, flag: str = "--config") -> dict[str, Any]:
+def read_config_file(
+    path: str | os.PathLike, flag: str = "--config", *, validate: bool = True
+) -> dict[str, Any]:
     """The scenario config fields of a JSON file (``fov-marl ... --config FILE``).
 
     The file holds a JSON object of :class:`ScenarioConfig` fields, any subset
-    (``ScenarioConfig.to_dict()`` written with ``json.dump`` is one). It is validated as
-    :meth:`ScenarioConfig.from_dict` would (alone, before other flags are applied).
+    (``ScenarioConfig.to_dict()`` written with ``json.dump`` is one). With ``validate``
+    it is validated as :meth:`ScenarioConfig.from_dict` would, alone; without, only its
+    field names are checked (the CLI validates the fields once the flags that override
+    them are applied: a file of 3 ``initial_poses`` with ``--n-agents 3``).
 
     Returns:
         The fields as given (``scenario`` included when the file has it).
@@ -585,7 +589,13 @@ def read_config_file(path: str | os.PathLike, flag: str = "--config") -> dict[st
             f"{flag} {path}: must hold a JSON object of config fields, got {type(data).__name__}"
         )
     try:
-        ScenarioConfig.from_dict(data)
+        if validate:
+            ScenarioConfig.from_dict(data)
+        elif sorted(set(data) - _FIELDS):  # the message of from_dict
+            raise ConfigError(
+                f"unknown config field(s) {sorted(set(data) - _FIELDS)}; valid fields are "
+                f"{sorted(_FIELDS)}"
+            )
     except ConfigError as exc:
         raise ConfigError(f"{flag} {path}: {exc}") from None
     return data
@@ -612,7 +622,8 @@ def cli_overrides(
     sources: dict[str, str] = {}
     scenario = None
     if config_file is not None:
-        fields = dict(read_config_file(config_file))
+        # values are validated by the caller with the flags applied (precedence)
+        fields = dict(read_config_file(config_file, validate=False))
         scenario = fields.pop("scenario", None)
         sources = dict.fromkeys(fields, f"--config {config_file}")
     env = parse_assignments(env_items, "--env")

@@ -12,7 +12,8 @@ from ``results.json`` and the key it comes from is named next to its table):
     final configurations (Fig. 5), η(t) raw and normalised (Fig. 6), PF calibration.
 (a') The literal reading: the same comparison at the env default σ = 2.8 m, where η = 1
     is reachable and "time to η = 0.99" is the paper's measure.
-(b) Table I: controller CPU ms per robot-step, mean ± std over robots, for N = 6/9/12
+(b) Table I: controller CPU ms per robot-step, mean ± std over episodes (the batched
+    controller charges every robot an equal share), for N = 6/9/12
     (40 m arena, as the paper) and 24/48/100 in scaled arenas L = 40 √(N/6), with the
     per-stage split (tracker, Lloyd, safety rows, QP). Run serially after everything
     else, so parallel workers do not distort the timings.
@@ -48,8 +49,24 @@ from fov_marl.evaluation import (
     run_episode,
     summarize,
 )
+from fov_marl.jsonio import write_json
 
-__all__ = ["reproduce", "PAPER", "plan", "Job"]
+__all__ = ["reproduce", "PAPER", "plan", "Job", "OUTPUT_FILES"]
+
+#: the files :func:`reproduce` writes into its folder (besides ``cache/``); the CLI
+#: checks each can be written before the runs start
+OUTPUT_FILES = (
+    "report.md",
+    "results.json",
+    "series.json",
+    "fig5_final_configurations.png",
+    "fig6_eta.png",
+    "fig6b_eta_literal.png",
+    "fig_calibration.png",
+    "fig7_crossing.png",
+    "fig_dense_safety.png",
+    "fig_cpu_vs_n.png",
+)
 
 PAPER = {
     "time_increase_pct": 18.6,
@@ -468,6 +485,10 @@ def _table_one(recs: list[EpisodeRecord], arenas: dict[int, float]) -> list[dict
     for n in sorted({r.n_agents for r in recs}):
         rs = [r for r in recs if r.n_agents == n]
         per_robot = np.concatenate([np.asarray(r.cpu_ms_by_robot or [np.nan]) for r in rs])
+        # the batched controller solves the team's QPs in one call and charges every robot
+        # an equal share: a spread over robots is then 0 by construction, so the spread
+        # reported is over episodes (each episode's mean per robot-step)
+        per_episode = np.array([np.nanmean(r.cpu_ms_by_robot or [np.nan]) for r in rs])
         stages: dict[str, float] = {}
         for r in rs:
             for k, v in (r.cpu_ms_by_stage or {}).items():
@@ -477,7 +498,11 @@ def _table_one(recs: list[EpisodeRecord], arenas: dict[int, float]) -> list[dict
                 "n_agents": n,
                 "arena_m": arenas[n],
                 "mean": float(np.nanmean(per_robot)),
-                "std": float(np.nanstd(per_robot, ddof=1)) if per_robot.size > 1 else 0.0,
+                "std": (
+                    float(np.nanstd(per_episode, ddof=1)) if per_episode.size > 1 else math.nan
+                ),
+                "std_over": "episodes",
+                "episodes": int(per_episode.size),
                 "robots": int(per_robot.size),
                 "steps": int(sum(r.steps for r in rs)),
                 "stages": stages,
@@ -486,6 +511,11 @@ def _table_one(recs: list[EpisodeRecord], arenas: dict[int, float]) -> list[dict
             }
         )
     return rows
+
+
+def _std_text(std: float) -> str:
+    """A spread for the report's tables: 3 decimals, or – when there is none (NaN)."""
+    return f"{std:.3f}" if math.isfinite(std) else "\u2013"
 
 
 # ------------------------------------------------------------------------ driver
@@ -642,21 +672,13 @@ def reproduce(
     walls = [r.get("wall_s") for r in par + ser]
     results["runs_wall_s_sum"] = None if None in walls else float(sum(walls))
     results["figures"] = figs
-    (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
-    (out / "series.json").write_text(json.dumps(series, default=_json_default))
+    write_json(out / "results.json", results, indent=1)
+    write_json(out / "series.json", series)
     (out / "report.md").write_text(_markdown(results))
     return out / "report.md"
 
 
 _CFG_KEYS = set(make_config().to_dict())
-
-
-def _json_default(x: Any) -> Any:
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    return float(x)
 
 
 def _calibration_summary(cal: list[dict[str, list[float]]]) -> dict[str, Any]:
@@ -1090,8 +1112,10 @@ def _markdown(res: dict[str, Any]) -> str:
         "",
         "Controller time only (particle filters, Lloyd, safety rows, cascade + final QPs), not "
         "the simulator, measured serially on this machine after all other runs. Per robot: its "
-        "own QP solves plus an equal share of the team-batched stages; mean ± std over robots "
-        "(pooled over seeds), as the paper. N ≤ 12 in the paper's 40 m arena; larger teams in "
+        "own QP solves plus an equal share of the team-batched stages. Mean ± std over "
+        "episodes (seeds), not over robots as the paper: the team's QPs are solved in one "
+        "batched call, so every robot's share is equal and a spread over robots would be 0 "
+        "by construction (\u2013: a single episode). N ≤ 12 in the paper's 40 m arena; larger teams in "
         "scaled arenas L = 40 √(N/6) m (`scaling`). The paper's numbers include ROS and another "
         "CPU: compare the trend with N, not the absolute value.",
         "",
@@ -1104,7 +1128,7 @@ def _markdown(res: dict[str, Any]) -> str:
         paper = f"{PAPER['cpu_ms'][n]} ± {PAPER['cpu_std'][n]}" if n in PAPER["cpu_ms"] else "–"
         st = r["stages"]
         L.append(
-            f"| {n} | {r['arena_m']:.1f} | {paper} | {r['mean']:.3f} ± {r['std']:.3f} | "
+            f"| {n} | {r['arena_m']:.1f} | {paper} | {r['mean']:.3f} ± {_std_text(r['std'])} | "
             + " | ".join(
                 _f(st.get(k), 3) for k in ("tracker", "lloyd", "safety_rows", "qp", "other")
             )

@@ -80,7 +80,6 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import json
 import os
 import sys
 import time
@@ -98,7 +97,9 @@ from fov_marl.adversaries import (
     make_start_poses,
 )
 from fov_marl.infos import metrics_of, safety_of
+from fov_marl.jsonio import write_json
 from fov_marl.metrics import chatter_flips
+from fov_marl.validation import MAX_SEED, check_writable
 
 __all__ = [
     "StressCase",
@@ -581,14 +582,15 @@ def _positive_int(flag: str):
     return conv
 
 
-def _non_negative_int(flag: str):
+def _non_negative_int(flag: str, hi: int | None = None):
     def conv(s: str) -> int:
         try:
             v = int(s)
         except ValueError:
             v = -1
-        if v < 0:
-            raise argparse.ArgumentTypeError(f"{flag} must be an integer >= 0, got {s!r}")
+        if v < 0 or (hi is not None and v > hi):
+            allowed = f"in [0, {hi}]" if hi is not None else ">= 0"
+            raise argparse.ArgumentTypeError(f"{flag} must be an integer {allowed}, got {s!r}")
         return v
 
     return conv
@@ -665,7 +667,10 @@ def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
         "--steps", type=_positive_int("--steps"), default=300, help="steps per episode (dt 0.2 s)"
     )
     p.add_argument(
-        "--seed", type=_non_negative_int("--seed"), default=0, help="episode k uses seed + k"
+        "--seed",
+        type=_non_negative_int("--seed", MAX_SEED),
+        default=0,
+        help=f"first seed in [0, {MAX_SEED}]; episode k uses seed + k",
     )
     p.add_argument(
         "--workers",
@@ -757,6 +762,12 @@ def _cases_from_args(args: argparse.Namespace) -> list[StressCase]:
         "start": args.starts,
     }
     given = {k: v for k, v in dims.items() if v is not None}
+    flags = {"adversary": "--adversaries", "n_agents": "--n-agents", "fov_deg": "--fov-deg",
+             "start": "--starts"}  # fmt: skip
+    for k, v in given.items():
+        twice = sorted({x for x in v if list(v).count(x) > 1}, key=str)
+        if twice:  # a repeated value would run (and print) the same cases twice
+            raise ValueError(f"{flags[k]} lists {', '.join(map(str, twice))} more than once")
     if args.quick or (not args.full and not given):
         cases = [
             c
@@ -831,7 +842,11 @@ def cmd_stress(args: argparse.Namespace) -> int:
     from fov_marl.backends import check_backend, progress_bar
 
     check_backend(args.backend, args.ray_address)
+    if args.json is not None and not args.json.strip():
+        raise ValueError("--json must be a file path, got ''")
     cases = _cases_from_args(args)
+    if args.json is not None:  # the last check: before the sweep, not after it
+        check_writable("--json", [args.json])
     episodes = args.episodes if args.episodes is not None else (20 if args.full else 3)
     workers = args.workers or ((os.cpu_count() or 1) if args.backend == "ray" else 1)
     t0 = time.perf_counter()
@@ -864,7 +879,7 @@ def cmd_stress(args: argparse.Namespace) -> int:
             "wall_s": time.perf_counter() - t0,
             "rows": rows,
         }
-        path.write_text(json.dumps(out, indent=2))
+        write_json(path, out, indent=2)
         if not args.quiet:
             print(f"\nwrote {path}")
     collided = any(r["collisions"] > 0 for r in rows)

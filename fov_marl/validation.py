@@ -54,6 +54,8 @@ __all__ = [
     "as_real_vector",
     "holds_bool",
     "check_out_dir",
+    "check_writable",
+    "MAX_SEED",
     "check_out_file",
     "check_params",
 ]
@@ -500,6 +502,37 @@ def check_out_file(name: str, value: str | os.PathLike, suffixes: Sequence[str])
     except (OSError, ValueError) as exc:
         raise ConfigError(f"{name} {text!r}: not a usable path ({_path_reason(exc)})") from None
     return p
+
+
+#: largest seed the CLI accepts (stable-baselines3 seeds NumPy's legacy generator, which
+#: needs < 2**32; episode or copy k then uses seed + k)
+MAX_SEED = 2**31 - 1
+
+
+def check_writable(name: str, paths: Sequence[str | os.PathLike]) -> None:
+    """Before any work: each path can be written now. Its folder is created (with its
+    parents), the file opened for appending and, when it did not exist, removed again,
+    so a run never ends in a write error after its work (a folder where the file should
+    be, a read-only or virtual file system). Existing files are left as they are.
+
+    Raises:
+        ConfigError: naming ``name`` (the flag) and the path that cannot be written.
+    """
+    for path in paths:
+        p = Path(path)
+        try:
+            p.parent.mkdir(parents=True, exist_ok=True)
+            existed = os.path.lexists(p)
+            if existed and not p.is_file():
+                raise ConfigError(f"{name}: {p} exists and is not a file")
+            with open(p, "a", encoding="utf-8"):
+                pass
+            if not existed:
+                p.unlink()
+        except ConfigError:
+            raise
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"{name}: cannot write {p} ({_path_reason(exc)})") from None
 
 
 def parse_assignments(items: Sequence[str] | None, flag: str) -> dict[str, Any]:

@@ -285,6 +285,66 @@ def test_clashing_out_paths_are_caught_before_any_work(argv, tmp_path, capsys, m
     assert "--out" in err and str(blocker) in err
 
 
+@pytest.mark.parametrize(
+    ("argv", "blocked", "says"),
+    [
+        (["evaluate", "--episodes", "1", "--out", "{d}"], "results.json", "--out"),
+        (["reproduce", "--quick", "--out", "{d}"], "report.md", "--out"),
+        (["reproduce", "--quick", "--out", "{d}"], "fig6_eta.png", "--out"),
+        (["train", "--timesteps", "8", "--out", "{d}", "--force"], "config.json", "--out"),
+        (["stress", "--quick", "--json", "{d}/rows.json"], "rows.json", "--json"),
+    ],
+    ids=["eval-results", "repro-report", "repro-figure", "train-config", "stress-json"],
+)
+def test_output_files_blocked_by_a_folder_fail_before_any_work(
+    argv, blocked, says, tmp_path, capsys, monkeypatch
+):
+    """Red team 4: a folder where an output file goes ran all the work, then failed
+    with a bare "Is a directory" that named no flag (train left a model without its
+    config.json)."""
+    import fov_marl.evaluation
+    import fov_marl.report
+    import fov_marl.stress
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("work started before the output files were checked")
+
+    monkeypatch.setattr(fov_marl.report, "reproduce", no_work)
+    monkeypatch.setattr(fov_marl.evaluation, "run_episode", no_work)
+    monkeypatch.setattr(fov_marl.stress, "run_stress", no_work)
+    if argv[0] == "train":
+        pytest.importorskip("stable_baselines3")
+        import fov_marl.training.trainer
+
+        monkeypatch.setattr(fov_marl.training.trainer, "train", no_work)
+    (tmp_path / blocked).mkdir()
+    err = _error_line([a.replace("{d}", str(tmp_path)) for a in argv], capsys)
+    assert err.startswith(f"fov-marl {argv[0]}: error: {says}") and blocked in err, err
+
+
+def test_stress_json_seed_and_grid_lists_are_checked(tmp_path, capsys):
+    (tmp_path / "file").write_text("")
+    for argv, says in [
+        (["stress", "--quick", "--json", ""], "--json must be a file path"),
+        (["stress", "--quick", "--json", str(tmp_path / "file" / "x.json")], "--json: cannot"),
+        (["stress", "--quick", "--seed", "2147483648"], "--seed must be an integer in"),
+        (["stress", "--adversaries", "rush,rush", "--n-agents", "2"], "rush more than once"),
+    ]:
+        assert says in _error_line(argv, capsys)
+
+
+def test_config_file_fields_are_validated_with_the_flags_applied(tmp_path, capsys):
+    """Red team 4: a --config of 3 initial_poses was refused with --n-agents 3 (the file
+    was validated alone, at the default N = 6, before the flags that override it)."""
+    cfg = tmp_path / "ip3.json"
+    cfg.write_text(json.dumps({"initial_poses": [[5, 5, 0], [10, 10, 0], [20, 20, 0]]}))
+    base = ["evaluate", "--config", str(cfg), "--episodes", "1", "--max-cycles", "3", "--quiet"]
+    assert main([*base, "--n-agents", "3"]) is not None
+    capsys.readouterr()
+    err = _error_line(base, capsys)  # N = 6 in force: the file is named, with the length
+    assert err.startswith(f"fov-marl evaluate: error: --config {cfg}: initial_poses must have")
+
+
 def test_render_onto_an_existing_directory(tmp_path, capsys):
     (tmp_path / "ep.gif").mkdir()
     err = _error_line(["render", "--policy", "random", "--out", str(tmp_path / "ep.gif")], capsys)
@@ -534,3 +594,11 @@ def test_pfcbf_episodes_charge_every_robot_its_share_of_the_cpu_time():
         per = np.asarray(r.cpu_ms_by_robot)
         assert per.shape == (4,) and np.isfinite(per).all() and (per > 0).all()
         assert per.sum() / 4 == pytest.approx(r.cpu_ms_per_robot_step, rel=0.05)
+
+
+def test_train_intervention_coef_needs_the_filter(tmp_path, capsys):
+    """Red team 4: accepted without --safety-filter, where it has nothing to weigh."""
+    pytest.importorskip("stable_baselines3")
+    argv = ["train", "--timesteps", "8", "--out", str(tmp_path / "r"), "--intervention-coef", "1"]
+    assert "--intervention-coef 1.0 needs --safety-filter" in _error_line(argv, capsys)
+    assert not (tmp_path / "r").exists()

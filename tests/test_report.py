@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 
 from fov_marl.cli import main
+from fov_marl.report import OUTPUT_FILES
 
 FIGURES = {
     "fig5_final_configurations.png",
@@ -38,7 +39,12 @@ def quick_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("report")
     assert main(["reproduce", "--out", str(out), "--quick", "--workers", "1"]) == 0
     md = (out / "report.md").read_text()
-    data = json.loads((out / "results.json").read_text())
+
+    def strict(name):  # standard JSON: NaN / Infinity are refused (red team 4)
+        raise ValueError(f"non-standard JSON constant {name}")
+
+    data = json.loads((out / "results.json").read_text(), parse_constant=strict)
+    json.loads((out / "series.json").read_text(), parse_constant=strict)
     return out, md, data
 
 
@@ -51,6 +57,7 @@ def test_sections_figures_and_the_papers_numbers(quick_report):
     assert re.search(r"\*\*(not )?significant\*\* at the 5% level", md)
     figures = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)
     assert set(figures) == FIGURES and len(figures) == len(FIGURES)
+    assert FIGURES <= set(OUTPUT_FILES)  # the CLI checks them before the runs
     for name in figures:
         with Image.open(out / name) as im:
             assert im.size[0] >= 400 and im.size[1] >= 300
@@ -64,7 +71,10 @@ def test_results_json_records_and_clipped_intervals(quick_report):
     assert set(data) >= {"coverage", "literal", "scaling", "crossing", "dense", "calibration"}
     assert [r["n_agents"] for r in data["scaling"]] == [6, 12]
     for r in data["scaling"]:
-        assert r["mean"] > 0 and r["std"] >= 0 and set(r["stages"]) >= {"tracker", "qp"}
+        assert r["mean"] > 0 and set(r["stages"]) >= {"tracker", "qp"}
+        # spread over episodes (null for one), never a spread over equal per-robot shares
+        assert r["std_over"] == "episodes"
+        assert (r["std"] is None) == (r["episodes"] == 1) and (r["std"] is None or r["std"] > 0)
         assert sum(r["stages"].values()) == pytest.approx(r["mean"], rel=0.05)
     for key in ("coverage", "literal"):
         cov = data[key]
@@ -113,7 +123,8 @@ def test_report_numbers_are_traceable_to_results_json(quick_report):
         assert row.startswith(f"{c['rel_pct']:+.1f}%")
     for r in data["scaling"]:
         assert f"| {r['n_agents']} | {r['arena_m']:.1f} |" in md
-        assert f"{r['mean']:.3f} ± {r['std']:.3f}" in md
+        std = "\u2013" if r["std"] is None else f"{r['std']:.3f}"  # – for one episode
+        assert f"{r['mean']:.3f} ± {std}" in md
     for e in data["crossing"]["episodes"]:
         assert f"| {e['seed']} | {e['arrived']} |" in md
     d = data["dense"]["rows"][0]

@@ -30,6 +30,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from fov_marl.validation import MAX_SEED
+
 for _pkg in ("stable_baselines3", "torch"):
     if importlib.util.find_spec(_pkg) is None:
         raise ImportError(f"{_pkg} is not installed")
@@ -37,7 +39,6 @@ for _pkg in ("stable_baselines3", "torch"):
 __all__ = ["add_train_arguments", "run_train", "parse_hyperparams"]
 
 _DEFAULT_TIMESTEPS = 1_000_000
-MAX_SEED = 2**31 - 1  # stable-baselines3 seeds NumPy's legacy generator (< 2**32)
 
 
 def _int_in(flag: str, lo: int, hi: int | None = None, *, sci: bool = False):
@@ -361,11 +362,16 @@ def run_train(args: argparse.Namespace) -> Path | int:
     """
     from fov_marl.config import make_config, source_of_error
     from fov_marl.training.trainer import effective_timesteps, train, validate_hyperparams
-    from fov_marl.validation import ConfigError
+    from fov_marl.validation import ConfigError, check_writable
 
     out = _check_out(args)
     if args.ctde and args.arch != "set":
         raise ValueError("--ctde needs --arch set (an MLP actor would read the critic's state)")
+    if args.intervention_coef and not args.safety_filter:
+        raise ValueError(
+            f"--intervention-coef {args.intervention_coef} needs --safety-filter (it weighs "
+            "the filter's action change; without the filter it would do nothing)"
+        )
     if args.arch == "set" and args.algo != "ppo":
         raise ValueError(f"--arch set needs --algo ppo, got --algo {args.algo}")
     if args.init_from is not None:
@@ -395,6 +401,8 @@ def run_train(args: argparse.Namespace) -> Path | int:
     except ConfigError as exc:
         src = source_of_error(str(exc), sources) or _flag_of(str(exc), args) or "--env"
         raise ValueError(f"{src} {exc}") from None
+    # the last check, so a refused run leaves no folder behind: the files can be written
+    check_writable("--out", [out / "model.zip", out / "config.json"])
     done_at = effective_timesteps(args.algo, args.timesteps, args.n_envs * n_agents, hyperparams)
     if done_at != args.timesteps:
         print(
