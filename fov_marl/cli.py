@@ -253,6 +253,7 @@ def _check_config(args: argparse.Namespace, loaded: Any | None) -> dict[str, Any
         if loaded is not None:
             raise CliError(f"--policy {args.policy}: its config.json: {_one_line(exc)}") from None
         raise CliError(_one_line(exc)) from None
+    args.resolved_config = cfg.to_dict()  # what the episodes ran on (results.json)
     if loaded is not None and cfg.n_agents != loaded.n_agents:
         src = sources.get("n_agents", "--n-agents")
         raise CliError(
@@ -316,7 +317,11 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     out = {
         "episodes": [r.to_json(with_series=args.save_series) for r in records],
         "summary": summary,
-        "args": {k: v for k, v in vars(args).items() if k != "func"},
+        "args": {k: v for k, v in vars(args).items() if k not in ("func", "resolved_config")},
+        # the scenario config in force (--config file, --env, flags and a model's own
+        # fields resolved) and the code that ran, so the record stands on its own
+        "config": args.resolved_config,
+        "fov_marl_version": _version(),
     }
     columns = EVAL_COLUMNS_BY_SCENARIO[args.scenario]
     print(format_table([[getattr(r, c) for c in columns] for r in records], columns))
@@ -565,7 +570,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--episodes",
         type=_positive_int("--episodes", 10**6),
         default=5,
-        help="episodes to run, in [1, 1e6]",
+        help="episodes to run, an integer in [1, 1000000]",
     )
     add_backend_arguments(e)
     e.add_argument("--out", default=None, help="directory for results.json (default: none)")
@@ -645,8 +650,10 @@ def build_parser() -> argparse.ArgumentParser:
         type=_int_in("--n-agents", 2, BENCH_MAX_AGENTS),
         nargs="+",
         default=None,
-        help=f"team sizes, each in [2, {BENCH_MAX_AGENTS}] (the tracker and controller need a "
-        "neighbour; the env section keeps the 40 m arena) (default 6 9 12 24 48)",
+        help=f"team sizes of the tracker, control and controller sections, each in [2, "
+        f"{BENCH_MAX_AGENTS}] (they need a neighbour); the env, vector_env, vector_filter, "
+        "filtered_step and issue sections keep their own sizes (N = 6 and 48, the "
+        "issues' figures) (default 6 9 12 24 48)",
     )
     b.set_defaults(func=run_bench)
 

@@ -578,6 +578,7 @@ def reproduce(
 
     results: dict[str, Any] = {
         "quick": quick,
+        "seeds_arg": seeds,
         "sizes": p["sizes"],
         "code_fingerprint": code,
         "git": _git_state(),
@@ -969,11 +970,14 @@ def _markdown(res: dict[str, Any]) -> str:
     cr = res["crossing"]["summary"]
     coll = sum(e["collisions"] for e in cov["episodes"] + lit["episodes"])
     runs = len(cov["episodes"]) + len(lit["episodes"])
+    command = "fov-marl reproduce" + (" --quick" if res["quick"] else "")
+    if res.get("seeds_arg") is not None:
+        command += f" --seeds {res['seeds_arg']}"
     L = [
         "# fov_marl: reproduction of Section VII",
         "",
-        f"{'Quick (reduced) run' if res['quick'] else 'Full run'}: `fov-marl reproduce"
-        f"{' --quick' if res['quick'] else ''}`: {res['runs']} runs, {res['cached_runs']} of them "
+        f"{'Quick (reduced) run' if res['quick'] else 'Full run'}: `{command}`: "
+        f"{res['runs']} runs, {res['cached_runs']} of them "
         f"read from `cache/`; this invocation took {res['elapsed_s'] / 60:.1f} min "
         f"({res['runs_elapsed_s'] / 60:.1f} min running or reading the runs); the runs' own wall "
         "time, summed over processes: "

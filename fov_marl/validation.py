@@ -491,7 +491,7 @@ def check_out_file(name: str, value: str | os.PathLike, suffixes: Sequence[str])
     try:
         p = Path(text)
         if p.suffix.lower() not in suffixes:
-            raise ConfigError(f"{name} must end in {', '.join(suffixes)}, got {p.name!r}")
+            raise ConfigError(f"{name} must end in {', '.join(suffixes)}, got {text!r}")
         if p.is_dir():
             raise ConfigError(f"{name} {text}: is a directory")
         if os.path.lexists(p) and not os.access(p, os.W_OK):

@@ -602,3 +602,46 @@ def test_train_intervention_coef_needs_the_filter(tmp_path, capsys):
     argv = ["train", "--timesteps", "8", "--out", str(tmp_path / "r"), "--intervention-coef", "1"]
     assert "--intervention-coef 1.0 needs --safety-filter" in _error_line(argv, capsys)
     assert not (tmp_path / "r").exists()
+    argv = ["train", "--timesteps", "8", "--out", str(tmp_path / "r"), "--workers", "2"]
+    argv += ["--n-envs", "1"]
+    assert "--workers 2 must be at most --n-envs 1" in _error_line(argv, capsys)
+
+
+def test_train_force_removes_the_old_runs_checkpoints(tmp_path, capsys, monkeypatch):
+    """Red team 4: --force left model_96_steps.zip of the old run beside a 32-step model."""
+    pytest.importorskip("stable_baselines3")
+    import fov_marl.training.trainer
+
+    out = tmp_path / "run"
+    (out / "checkpoints").mkdir(parents=True)
+    for name in ("model_96_steps.zip", "model_vecnormalize_96_steps.pkl", "notes.txt"):
+        (out / "checkpoints" / name).write_text("old")
+    (out / "model.zip").write_text("old")
+    monkeypatch.setattr(fov_marl.training.trainer, "train", lambda *a, **k: out / "model.zip")
+    assert main(["train", "--timesteps", "8", "--out", str(out), "--force"]) is not None
+    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == ["notes.txt"]
+
+
+def test_evaluate_results_record_the_config_in_force_and_the_version(tmp_path):
+    from fov_marl import __version__
+
+    assert main(_eval_args(tmp_path, extra=("--env", "safety_distance_m=2.5"))) is not None
+    data = json.loads((tmp_path / "results.json").read_text())
+    assert data["fov_marl_version"] == __version__
+    cfg = data["config"]
+    assert cfg["n_agents"] == 3 and cfg["safety_distance_m"] == 2.5 and cfg["max_cycles"] == 40
+
+
+def test_train_says_how_checkpoint_every_is_rounded(tmp_path, capsys, monkeypatch):
+    """Red team 4: --checkpoint-every 5 silently saved every 4 timesteps."""
+    pytest.importorskip("stable_baselines3")
+    import fov_marl.training.trainer
+    from fov_marl.training.trainer import checkpoint_period
+
+    assert checkpoint_period(5, 4) == 4 and checkpoint_period(3, 4) == 4
+    assert checkpoint_period(100_000, 24) == 99_984
+    monkeypatch.setattr(fov_marl.training.trainer, "train", lambda *a, **k: tmp_path / "m.zip")
+    argv = ["train", "--timesteps", "8", "--out", str(tmp_path / "r"), "--n-envs", "1"]
+    assert main([*argv, "--n-agents", "2", "--checkpoint-every", "5"]) is not None
+    out = capsys.readouterr().out
+    assert "--checkpoint-every 5 saves every 4 timesteps" in out

@@ -159,7 +159,9 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--force",
         action="store_true",
-        help="overwrite the model.zip and config.json already in --out",
+        help="overwrite the model.zip and config.json already in --out (the old run's "
+        "checkpoints/model_*_steps.zip and their VecNormalize files are removed; tb/ keeps "
+        "its logs, one folder per run)",
     )
     parser.add_argument(
         "--n-envs",
@@ -361,12 +363,22 @@ def run_train(args: argparse.Namespace) -> Path | int:
     message naming the flag.
     """
     from fov_marl.config import make_config, source_of_error
-    from fov_marl.training.trainer import effective_timesteps, train, validate_hyperparams
+    from fov_marl.training.trainer import (
+        checkpoint_period,
+        effective_timesteps,
+        train,
+        validate_hyperparams,
+    )
     from fov_marl.validation import ConfigError, check_writable
 
     out = _check_out(args)
     if args.ctde and args.arch != "set":
         raise ValueError("--ctde needs --arch set (an MLP actor would read the critic's state)")
+    if args.workers > args.n_envs:
+        raise ValueError(
+            f"--workers {args.workers} must be at most --n-envs {args.n_envs} (each worker "
+            "steps at least one env copy)"
+        )
     if args.intervention_coef and not args.safety_filter:
         raise ValueError(
             f"--intervention-coef {args.intervention_coef} needs --safety-filter (it weighs "
@@ -403,6 +415,10 @@ def run_train(args: argparse.Namespace) -> Path | int:
         raise ValueError(f"{src} {exc}") from None
     # the last check, so a refused run leaves no folder behind: the files can be written
     check_writable("--out", [out / "model.zip", out / "config.json"])
+    if args.force:  # the old run's checkpoints would sit beside the new run's
+        for pattern in ("model_*_steps.zip", "model_vecnormalize_*_steps.pkl"):
+            for stale in (out / "checkpoints").glob(pattern):
+                stale.unlink()
     done_at = effective_timesteps(args.algo, args.timesteps, args.n_envs * n_agents, hyperparams)
     if done_at != args.timesteps:
         print(
@@ -412,6 +428,16 @@ def run_train(args: argparse.Namespace) -> Path | int:
         )
     else:
         print(f"train: {done_at} timesteps", flush=True)
+    slots = args.n_envs * n_agents
+    if args.checkpoint_every and checkpoint_period(args.checkpoint_every, slots) != (
+        args.checkpoint_every
+    ):
+        print(
+            f"train: --checkpoint-every {args.checkpoint_every} saves every "
+            f"{checkpoint_period(args.checkpoint_every, slots)} timesteps (a multiple of the "
+            f"{slots} timesteps of one vector step)",
+            flush=True,
+        )
     try:
         path = train(
             args.algo,

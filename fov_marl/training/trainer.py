@@ -156,6 +156,7 @@ __all__ = [
     "build_env",
     "make_training_vec_env",
     "train",
+    "checkpoint_period",
     "load_policy",
     "LearnedPolicy",
     "FovMetricsCallback",
@@ -729,6 +730,12 @@ def _next_run_dir(root: Path, prefix: str) -> Path:
 
 
 # ---------------------------------------------------------------------- train
+def checkpoint_period(checkpoint_every: int, slots: int) -> int:
+    """Timesteps between checkpoints: ``checkpoint_every`` rounded down to a multiple of
+    ``slots`` (the timesteps of one vector step), at least one vector step."""
+    return max(int(checkpoint_every) // int(slots), 1) * int(slots)
+
+
 def train(
     algo: str = "ppo",
     scenario: str = "coverage",
@@ -789,7 +796,9 @@ def train(
             ``max_cycles``; ``None`` keeps the env's. The saved evaluation config keeps
             the env's own horizon (default 1000 steps).
         normalize: wrap in ``VecNormalize`` (observations and rewards).
-        checkpoint_every: save a checkpoint every this many timesteps (0: never).
+        checkpoint_every: save a checkpoint every this many timesteps (0: never),
+            rounded down to a multiple of the SB3 slots (``n_envs`` × N timesteps per
+            vector step; at least one vector step): :func:`checkpoint_period`.
         progress_bar: show SB3's tqdm/rich progress bar (per timestep); silently none
             when tqdm or rich is not installed.
         torch_threads: ``torch.set_num_threads`` during training (restored after), in
@@ -983,7 +992,7 @@ def train(
         if checkpoint_every:
             callbacks.append(
                 CheckpointCallback(
-                    save_freq=max(int(checkpoint_every) // venv.num_envs, 1),
+                    save_freq=checkpoint_period(checkpoint_every, venv.num_envs) // venv.num_envs,
                     save_path=str(out / "checkpoints"),
                     name_prefix="model",
                     save_vecnormalize=normalize,
