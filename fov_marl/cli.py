@@ -416,6 +416,7 @@ def run_reproduce(args: argparse.Namespace) -> Path:
         seeds=args.seeds,
         backend=args.backend,
         ray_address=args.ray_address,
+        progress=not args.quiet,
     )
     print(f"wrote {path}")
     return path
@@ -598,6 +599,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="random starts per coverage condition, in [1, 1000] (default 20; 2 with --quick); "
         "finished runs are cached in OUT/cache, so an interrupted run resumes",
     )
+    r.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
     r.set_defaults(func=run_reproduce)
 
     d = sub.add_parser(

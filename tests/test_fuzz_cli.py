@@ -445,6 +445,7 @@ SPECS: dict[str, dict[str, dict]] = {
         "--backend": {"bad": ["nope", ""], "good": ["local"]},
         "--ray-address": {"bad": ["auto"], "good": []},
         "--seeds": {"bad": [*BAD_POSITIVE_INT, "1001"], "good": ["1", "1000"]},
+        "--quiet": {"bad": ["--quiet=1"], "good": [None]},
         "--debug": {"bad": ["--debug=no"], "good": [None]},
     },
     "train": {
