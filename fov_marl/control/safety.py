@@ -865,23 +865,43 @@ def bearing_travel_reset(
 
 
 def bearing_travel_rows(
-    c_m: np.ndarray, yaw_rad: np.ndarray, budget_m: float, dt_s: float, v_max_mps: float
+    c_m: np.ndarray,
+    yaw_rad: np.ndarray,
+    budget_m: float,
+    dt_s: float,
+    v_max_mps: float,
+    fov_rad: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rows ``n_k · v ≤ max(0, (B − c_k) / dt)`` of the bearings where they can bind.
+
+    A row binds where one step at full speed could spend the rest of the budget,
+    ``B − c_k < v_max dt``. With ``fov_rad`` (β) that includes the bearings outside the
+    view with ``c_k = 0`` (never approached, or approached and left): when
+    ``v_max dt > B`` (e.g. v_max = 5 m/s at dt = 0.2 s, or dt = 1 s at 1 m/s) one step
+    could otherwise carry the robot ``v_max dt`` towards a bearing it has not looked at,
+    past the budget (red team 5 measured 0.99 m blind in one step with B = 0.5 m). The
+    bearings in view (within ``β/2 − π/K``, as :func:`bearing_travel_reset` clears them)
+    get no such row. Without ``fov_rad`` only ``c_k > 0`` rows are written (the rule
+    before; the same rows whenever ``v_max dt ≤ B``, the defaults' case).
 
     Args:
         c_m: ``(R, K)`` the approach per world bearing (m). yaw_rad: ``(R,)``.
         budget_m: B (m). dt_s: the step (s). v_max_mps: the speed limit (m/s).
+        fov_rad: the camera amplitude β (rad), or None.
 
     Returns:
         ``(A (R, K, 3), b (R, K) m/s, h (R, K) m)``: ``A = [−n_k, 0]`` in Σ_i,
-        ``h = B − c_k``; ``b = h = +inf`` where ``B − c_k ≥ v_max dt`` (no row).
+        ``h = B − c_k``; ``b = h = +inf`` where no row binds.
     """
     c = np.asarray(c_m, dtype=np.float64)
     R, K = c.shape
     ang = bearing_angles_body(K, yaw_rad)
     left = budget_m - c
-    on = (c > 0.0) & (left < v_max_mps * dt_s)
+    watched = c > 0.0
+    if fov_rad is not None and fov_rad < 2.0 * math.pi:
+        in_view = np.abs(ang) <= 0.5 * fov_rad - math.pi / K + 1e-9
+        watched = watched | ~in_view
+    on = watched & (left < v_max_mps * dt_s)
     A = np.zeros((R, K, 3))
     A[..., 0] = -np.cos(ang)
     A[..., 1] = -np.sin(ang)
@@ -1258,7 +1278,7 @@ def safety_rows(
         if bearing_travel_yaw_rad is None:
             raise ValueError("bearing_travel_m needs bearing_travel_yaw_rad (the robots' yaw)")
         A, b, h = bearing_travel_rows(
-            bearing_travel_m, bearing_travel_yaw_rad, blind_travel_m, dt_s, v_max_mps
+            bearing_travel_m, bearing_travel_yaw_rad, blind_travel_m, dt_s, v_max_mps, fov_rad
         )
         blocks_A.append(A)
         blocks_b.append(b)

@@ -711,6 +711,57 @@ def test_bearing_travel_rows_bind_only_near_the_budget():
     assert (kind == ROW_BLIND).sum() == 1 and np.allclose(A[kind == ROW_BLIND][0], [0, -1, 0])
 
 
+def test_bearing_travel_rows_cover_unseen_bearings_when_one_step_exceeds_the_budget():
+    """Red team 5: with v_max dt > B a bearing outside the view with c_k = 0 had no row,
+    and one step carried the robot v_max dt (0.99 m at 5 m/s, dt 0.2 s) towards it.
+    With β given, every bearing outside the view gets ``n_k · v ≤ (B − c_k)/dt`` when
+    ``B − c_k < v_max dt``; the bearings in view (β/2 − π/K) none."""
+    from fov_marl.control.safety import bearing_angles_body, bearing_travel_rows
+
+    K, B, fov = 24, 0.5, math.radians(120.0)
+    c = np.zeros((1, K))
+    yaw = np.array([0.3])
+    ang = bearing_angles_body(K, yaw)[0]
+    in_view = np.abs(ang) <= 0.5 * fov - math.pi / K + 1e-9
+    _, b, _ = bearing_travel_rows(c, yaw, B, 0.2, 5.0, fov)  # v_max dt = 1 m > B
+    assert np.all(np.isfinite(b[0]) == ~in_view)
+    np.testing.assert_allclose(b[0, ~in_view], B / 0.2)
+    _, b_old, _ = bearing_travel_rows(c, yaw, B, 0.2, 5.0)  # without β: the old rule
+    assert not np.isfinite(b_old).any()
+    _, b, _ = bearing_travel_rows(c, yaw, B, 0.2, 1.0, fov)  # v_max dt = 0.2 m ≤ B
+    assert not np.isfinite(b).any()  # the defaults' case: the same rows as before
+    _, b, _ = bearing_travel_rows(c, yaw, B, 0.2, 5.0, 2.0 * math.pi)  # 360°: all in view
+    assert not np.isfinite(b).any()
+
+
+@pytest.mark.parametrize(("v_max", "dt"), [(5.0, 0.2), (1.0, 1.0), (2.0, 0.5)])
+def test_filtered_robots_never_step_further_than_the_budget_into_an_unseen_bearing(v_max, dt):
+    """The red team's episode (random actions, N = 3, β = 120°, 20 m arena, seed 0): no
+    step moves a robot more than B (+ the arc's curvature) towards a bearing outside the
+    view it had at the step's start (before: 0.71-0.995 m with B = 0.5 m)."""
+    from fov_marl.envs import fov_coverage_v0
+    from fov_marl.wrappers import SafetyFilterWrapper
+
+    n, fov = 3, 120.0
+    base = fov_coverage_v0.parallel_env(
+        n_agents=n, fov_deg=fov, v_max_mps=v_max, dt_s=dt, arena_size_m=20.0, max_cycles=150
+    )
+    env = SafetyFilterWrapper(base)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    worst = 0.0
+    for _ in range(150):
+        before = base.poses.copy()
+        act = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+        env.step({a: act[i] for i, a in enumerate(env.possible_agents)})
+        d = base.poses[:, :2] - before[:, :2]
+        off = np.abs((np.arctan2(d[:, 1], d[:, 0]) - before[:, 2] + np.pi) % (2 * np.pi) - np.pi)
+        blind = off > math.radians(fov / 2)
+        if blind.any():
+            worst = max(worst, float(np.hypot(d[blind, 0], d[blind, 1]).max()))
+    assert worst <= 0.5 + 0.05, worst
+
+
 def test_blind_travel_bearings_validated():
     for bad in (1, 3, -1, 361, 2.5, True):
         with pytest.raises(ValueError, match="blind_travel_bearings"):
