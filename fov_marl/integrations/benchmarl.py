@@ -47,7 +47,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from fov_marl.integrations.common import require
-from fov_marl.validation import describe
+from fov_marl.validation import check_int, describe
 
 __all__ = ["ALGORITHMS", "FovMarlClass", "FovMarlTask", "make_experiment"]  # noqa: F822
 
@@ -85,7 +85,8 @@ def make_experiment(
     Args:
         algorithm: one of :data:`ALGORITHMS` (``"mappo"``, ``"ippo"``, ``"masac"``, ...).
         task: a task built by ``FovMarlTask.X.get_task({...})``, a ``FovMarlTask`` member,
-            or None for ``FovMarlTask.COVERAGE`` with the paper's defaults.
+            a registry name (``"fov_marl/coverage"``, ``"fov_marl/crossing"``), or None
+            for ``FovMarlTask.COVERAGE`` with the paper's defaults.
         seed: experiment seed.
         save_folder: where BenchMARL writes its folder (None: the current directory).
         algorithm_overrides: fields of the algorithm config.
@@ -106,12 +107,28 @@ def make_experiment(
     from benchmarl.experiment import Experiment, ExperimentConfig
     from benchmarl.models.mlp import MlpConfig
 
-    from fov_marl.integrations._benchmarl_tasks import FovMarlTask
+    from fov_marl.integrations._benchmarl_tasks import FovMarlClass, FovMarlTask
 
+    seed = check_int("seed", seed, 0, 2**31 - 1)
     if task is None:
         task = FovMarlTask.COVERAGE
+    if isinstance(task, str):
+        from benchmarl.environments import task_config_registry
+
+        names = sorted(k for k in task_config_registry if k.startswith("fov_marl/"))
+        if task not in names:
+            raise ValueError(f"task must be one of {names} (or a FovMarlTask), got {task!r}")
+        task = task_config_registry[task]
     if isinstance(task, FovMarlTask):
         task = task.get_from_yaml()
+    if not isinstance(task, FovMarlClass):
+        raise ValueError(
+            "task must be None, a FovMarlTask member, a task from FovMarlTask.X.get_task({...}) "
+            f"or a registry name such as 'fov_marl/coverage', got {describe(task)}"
+        )
+    for key, value in experiment_overrides.items():  # BenchMARL divides by these
+        if key.endswith("frames_per_batch") or key.endswith("n_envs_per_worker"):
+            check_int(f"experiment_overrides[{key!r}]", value, 1)
     algo_config = getattr(algos, ALGORITHMS[algorithm]).get_from_yaml()
     _apply("algorithm_overrides", algo_config, algorithm_overrides or {})
     config = ExperimentConfig.get_from_yaml()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Mapping
 from typing import Any
 
@@ -35,8 +36,9 @@ def make_parallel_env(
         **config: scenario config fields (``n_agents``, ``fov_deg``, ``max_cycles``, ...).
 
     Raises:
-        ValueError: an unknown scenario, a non-bool flag, non-dict wrapper kwargs, or a
-            bad config field (named by the env).
+        ValueError: an unknown scenario, a non-bool flag, non-dict wrapper kwargs,
+            wrapper kwargs with their wrapper off, an unknown wrapper keyword (the message
+            lists the valid ones), or a bad config field (named by the env).
     """
     from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
     from fov_marl.wrappers import BeliefObservationWrapper, SafetyFilterWrapper
@@ -46,9 +48,20 @@ def make_parallel_env(
     for name, flag in (("safety_filter", safety_filter), ("belief", belief)):
         if not isinstance(flag, bool):
             raise ValueError(f"{name} must be True or False, got {describe(flag)}")
-    for name, kw in (("filter_kwargs", filter_kwargs), ("belief_kwargs", belief_kwargs)):
-        if kw is not None and not isinstance(kw, Mapping):
+    for name, kw, flag, on, cls in (
+        ("filter_kwargs", filter_kwargs, "safety_filter", safety_filter, SafetyFilterWrapper),
+        ("belief_kwargs", belief_kwargs, "belief", belief, BeliefObservationWrapper),
+    ):
+        if kw is None:
+            continue
+        if not isinstance(kw, Mapping):
             raise ValueError(f"{name} must be a dict or None, got {describe(kw)}")
+        if kw and not on:  # set, but the wrapper is off: it would be silently ignored
+            raise ValueError(f"{name} needs {flag}=True, got {dict(kw)!r} with {flag}=False")
+        valid = [p for p in inspect.signature(cls.__init__).parameters if p not in ("self", "env")]
+        unknown = sorted(str(k) for k in kw if k not in valid)
+        if unknown:
+            raise ValueError(f"unknown {name} key(s) {unknown}; valid keys are {sorted(valid)}")
     module = fov_coverage_v0 if scenario == "coverage" else fov_crossing_v0
     env = module.parallel_env(render_mode=render_mode, **config)
     if safety_filter:

@@ -24,11 +24,11 @@ Ray is imported only when these functions are called.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from fov_marl.integrations.common import make_parallel_env, require
-from fov_marl.validation import check_int, describe
+from fov_marl.validation import check_int, check_real, describe
 
 __all__ = ["ENV_NAME", "POLICY_ID", "make_rllib_env", "ppo_config", "register_rllib_env"]
 
@@ -90,9 +90,9 @@ def ppo_config(
             ``train_batch_size_per_learner``, RLlib counts env steps), in [1, inf).
         minibatch_size: SGD minibatch, in [1, train_batch_size].
         num_epochs: SGD passes per iteration, in [1, inf).
-        lr, gamma: PPO learning rate and discount.
-        hidden: hidden layer sizes of the policy and value MLPs.
-        seed: RLlib's ``debugging(seed=...)``.
+        lr, gamma: PPO learning rate, in (0, 10], and discount, in [0, 1].
+        hidden: hidden layer sizes of the policy and value MLPs, each in [1, 65536].
+        seed: RLlib's ``debugging(seed=...)``, in [0, 2^31 - 1], or None.
 
     Raises:
         ValueError: a bad argument (named with its range) or env config field.
@@ -102,6 +102,13 @@ def ppo_config(
     check_int("train_batch_size", train_batch_size, 1)
     check_int("minibatch_size", minibatch_size, 1, train_batch_size)
     check_int("num_epochs", num_epochs, 1)
+    lr = check_real("lr", lr, 0.0, 10.0, lo_open=True)
+    gamma = check_real("gamma", gamma, 0.0, 1.0)
+    if isinstance(hidden, str | bytes) or not isinstance(hidden, Sequence) or not hidden:
+        raise ValueError(f"hidden must be a non-empty sequence of layer sizes, got {hidden!r}")
+    hidden = tuple(check_int(f"hidden[{i}]", h, 1, 65536) for i, h in enumerate(hidden))
+    if seed is not None:
+        seed = check_int("seed", seed, 0, 2**31 - 1, note="(or None)")
     env_config = dict(env_config or {})
     _parallel_env(env_config).close()  # a bad field fails here, not in a worker
     require("ray.rllib", "rllib")

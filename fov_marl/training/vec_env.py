@@ -75,6 +75,7 @@ from stable_baselines3.common.vec_env.base_vec_env import (
 )
 
 from fov_marl.infos import METRICS_PREFIX, AgentInfo, reset_safety_infos, status_code
+from fov_marl.validation import check_seed
 
 __all__ = [
     "ParallelEnvVecEnv",
@@ -198,6 +199,7 @@ class ParallelEnvVecEnv(VecEnv):
         """
         if seed is None:
             seed = int(np.random.default_rng().integers(0, np.iinfo(np.uint32).max))
+        seed = check_seed("seed", seed)  # 2.5 or "x": a ValueError naming seed
         self._copy_seeds = [int(seed) + k for k in range(self.n_copies)]
         return [self._copy_seeds[s // self.n_agents] for s in range(self.num_envs)]
 
@@ -451,7 +453,7 @@ class VectorEnvVecEnv(VecEnv):
         """
         if seed is None:
             seed = int(np.random.default_rng().integers(0, np.iinfo(np.uint32).max))
-        self._base_seed = int(seed)
+        self._base_seed = check_seed("seed", seed)  # 2.5 or "x": a ValueError naming seed
         return [self._base_seed + int(k) for k in self._slot_copy]
 
     # ------------------------------------------------------------ reset/step

@@ -149,3 +149,74 @@ def test_serial_training_env_copies_start_from_different_seeds():
             assert any(torch.equal(st[c], x) for x in starts)
     finally:
         env.close()
+
+
+def test_parallel_collector_workers_start_from_distinct_reproducible_seeds():
+    """Red team 6: in a ParallelEnv each worker got a pickled factory counting from 0, so
+    every copy started every episode from ``seed``. Workers now mix in their process
+    identity: copies differ, and the same script gives the same starts."""
+    import subprocess
+
+    script = (
+        "import torch\n"
+        "from torchrl.envs import ParallelEnv\n"
+        "from fov_marl.integrations.benchmarl import FovMarlTask\n"
+        "if __name__ == '__main__':\n"
+        "    t = FovMarlTask.COVERAGE.get_task({'n_agents': 2, 'max_cycles': 5})\n"
+        "    p = ParallelEnv(2, t.get_env_fun(2, True, 7, 'cpu'))\n"
+        "    s = p.reset()['state']\n"
+        "    print(not torch.equal(s[0], s[1]), s.sum(-1).tolist())\n"
+        "    p.close()\n"
+    )
+    runs = [
+        subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=240)
+        .stdout.strip()
+        .splitlines()[-1]
+        for _ in range(2)
+    ]
+    assert runs[0].startswith("True ") and runs[0] == runs[1], runs
+
+
+def test_copy_seed_is_seed_plus_k_in_the_factorys_process():
+    import os
+
+    from fov_marl.integrations._benchmarl_tasks import copy_seed
+
+    assert copy_seed(7, 3, os.getpid()) == 10
+    other = [copy_seed(7, k, -1) for k in range(3)]  # "another process": drawn, distinct
+    assert len(set(other)) == 3 and all(0 <= s < 2**31 for s in other)
+
+
+def test_task_config_changes_and_bad_task_inputs(tmp_path):
+    """Red team 6: max_steps kept the max_cycles of construction after
+    ``task.config.update`` (BenchMARL's way to change a task); bad task configs, YAML
+    files, task names, seeds and batch sizes were TypeError / AttributeError /
+    ZeroDivisionError."""
+    task = _tasks().COVERAGE.get_task({"n_agents": 2})
+    task.config.update({"max_cycles": 7})
+    assert task.max_steps(None) == 7
+    env = task.get_env_fun(1, True, 0, "cpu")()
+    assert env.rollout(50).shape[0] == 7
+    env.close()
+    task.config.update({"fov_deg": 500.0})
+    with pytest.raises(ValueError, match="fov_deg"):  # checked when the envs are made
+        task.get_env_fun(1, True, 0, "cpu")
+    with pytest.raises(ValueError, match=r"scenario is fixed by the task.*FovMarlTask.CROSSING"):
+        _tasks().COVERAGE.get_task({"scenario": "crossing"})
+    for bad in ([1, 2], "n_agents=3"):
+        with pytest.raises(ValueError, match="task config must be a dict"):
+            _tasks().COVERAGE.get_task(bad)
+    listed = tmp_path / "list.yaml"
+    listed.write_text("- 1\n- 2\n")
+    with pytest.raises(ValueError, match="must be a mapping"):
+        _tasks().COVERAGE.get_from_yaml(str(listed))
+    with pytest.raises(ValueError, match=r"task must be one of \['fov_marl/coverage'"):
+        make_experiment("mappo", "fov_marl/nope")
+    with pytest.raises(ValueError, match="task must be None, a FovMarlTask"):
+        make_experiment("mappo", 3)
+    with pytest.raises(ValueError, match="seed must be an integer"):
+        make_experiment("mappo", seed="x")
+    with pytest.raises(ValueError, match="on_policy_collected_frames_per_batch"):
+        make_experiment("mappo", on_policy_collected_frames_per_batch=0)
+    exp = make_experiment("mappo", "fov_marl/crossing", save_folder=str(tmp_path), **TINY)
+    assert exp.task.scenario == "crossing"

@@ -54,6 +54,16 @@ def test_ppo_config_shares_one_policy_and_validates():
         ppo_config({"fov_deg": 0.0})
     with pytest.raises(ValueError, match="env_config must be a dict"):
         make_rllib_env(["n_agents", 3])
+    # red team 6: accepted without complaint (hidden="abc" became ['a', 'b', 'c'])
+    for kw, says in [
+        ({"lr": -1.0}, "lr must be in"),
+        ({"gamma": 5.0}, "gamma must be in"),
+        ({"hidden": (0,)}, r"hidden\[0\] must be an integer"),
+        ({"hidden": "abc"}, "hidden must be a non-empty sequence"),
+        ({"seed": "x"}, "seed must be an integer"),
+    ]:
+        with pytest.raises(ValueError, match=says):
+            ppo_config({"n_agents": 2}, **kw)
 
 
 def test_example_rejects_bad_arguments_in_one_line():

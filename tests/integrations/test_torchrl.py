@@ -45,7 +45,11 @@ def test_check_env_specs_and_a_20_step_rollout(safety_filter):
     import torch
 
     env = make_env(
-        n_agents=N, max_cycles=8, seed=0, safety_filter=safety_filter, filter_kwargs=FAST
+        n_agents=N,
+        max_cycles=8,
+        seed=0,
+        safety_filter=safety_filter,
+        filter_kwargs=FAST if safety_filter else None,  # without the filter: an error
     )
     check_env_specs(env, seed=0)
     td = env.rollout(20, break_when_any_done=False)  # crosses two automatic resets
@@ -97,3 +101,10 @@ def test_wrap_and_bad_arguments():
         make_env(safety_filter="yes")
     with pytest.raises(ValueError, match="n_agents"):
         make_env(n_agents=0)
+    # red team 6: ignored without the flag, TypeError for an unknown key
+    with pytest.raises(ValueError, match="filter_kwargs needs safety_filter=True"):
+        make_env(n_agents=2, filter_kwargs={"init": "uniform"})
+    with pytest.raises(ValueError, match=r"unknown filter_kwargs key\(s\) \['zzz'\]"):
+        make_env(n_agents=2, safety_filter=True, filter_kwargs={"zzz": 1})
+    with pytest.raises(ValueError, match=r"unknown belief_kwargs key\(s\).*time_cap_s"):
+        make_env(n_agents=2, belief=True, belief_kwargs={"q": 1})

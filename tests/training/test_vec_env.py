@@ -389,6 +389,9 @@ def test_vector_adapter_termination_is_not_truncation():
 def test_vector_adapter_seeding_attributes_and_errors():
     venv = make_vector_vec_env(fov_coverage_v0, n_envs=3, n_agents=N, max_cycles=7)
     assert venv.seed(7) == [7] * N + [8] * N + [9] * N
+    for bad in (2.5, "x", -1, True):  # red team 6: 2.5 became 2, "x" an int() error
+        with pytest.raises(ValueError, match="seed must be an integer"):
+            venv.seed(bad)
     first = venv.reset()
     assert not np.array_equal(first, venv.reset())  # a seed is used once
     assert venv.get_attr("max_cycles", indices=[0, N]) == [7, 7]
