@@ -1273,6 +1273,22 @@ def safety_rows(
         blocks_b.append(np.where(on, np.maximum(0.0, left / dt_s), np.inf)[:, None])
         blocks_k.append(np.where(on, ROW_BLIND, -1).astype(np.int8)[:, None])
         blocks_h.append(np.where(on, left, np.inf)[:, None])
+        if v_max_mps * dt_s > blind_travel_m and fov_rad < 2.0 * math.pi:
+            # one step could spend more than the whole budget in a direction the vector
+            # does not point along (with a zero vector: any): cap every direction outside
+            # the view, as bearing_travel_rows does for the per-bearing budget (24 bearings
+            # in Σ_i, the view's bearings exempt). Not written when v_max dt ≤ B.
+            K = 24
+            ang = bearing_angles_body(K, np.zeros(R))
+            unseen = np.abs(ang) > 0.5 * fov_rad - math.pi / K + 1e-9
+            A = np.zeros((R, K, 3))
+            A[..., 0] = -np.cos(ang)
+            A[..., 1] = -np.sin(ang)
+            h = np.where(unseen, left[:, None], np.inf)
+            blocks_A.append(A)
+            blocks_b.append(np.where(unseen, np.maximum(0.0, left[:, None] / dt_s), np.inf))
+            blocks_k.append(np.where(unseen, ROW_BLIND, -1).astype(np.int8))
+            blocks_h.append(h)
 
     if bearing_travel_m is not None and blind_travel_m > 0.0:
         if bearing_travel_yaw_rad is None:

@@ -1137,3 +1137,30 @@ def test_hold_cleanup_never_approaches_and_never_worsens(seed, k):
     assert (val[b <= 0.0] >= -APPROACH_TOL).all()
     assert (val >= np.minimum(-b, val0) - 1e-12).all()
     assert np.hypot(out[0], out[1]) <= 1.0 + 1e-12
+
+
+def test_single_vector_budget_caps_unseen_directions_when_one_step_exceeds_it():
+    """The single-vector budget (blind_travel_bearings = 0) had the per-bearing budget's
+    gap: with v_max dt > B and a zero vector nothing bounded a blind step. Behind the
+    filter with that budget no step moves more than B towards an unseen direction."""
+    from fov_marl.envs import fov_coverage_v0
+    from fov_marl.wrappers import SafetyFilterWrapper
+
+    n, fov = 3, 120.0
+    base = fov_coverage_v0.parallel_env(
+        n_agents=n, fov_deg=fov, v_max_mps=5.0, dt_s=0.2, arena_size_m=20.0, max_cycles=150
+    )
+    env = SafetyFilterWrapper(base, controller_params={"blind_travel_bearings": 0})
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    worst = 0.0
+    for _ in range(150):
+        before = base.poses.copy()
+        act = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+        env.step({a: act[i] for i, a in enumerate(env.possible_agents)})
+        d = base.poses[:, :2] - before[:, :2]
+        off = np.abs((np.arctan2(d[:, 1], d[:, 0]) - before[:, 2] + np.pi) % (2 * np.pi) - np.pi)
+        blind = off > math.radians(fov / 2)
+        if blind.any():
+            worst = max(worst, float(np.hypot(d[blind, 0], d[blind, 1]).max()))
+    assert worst <= 0.5 + 0.05, worst
