@@ -424,14 +424,7 @@ class ScenarioConfig:
             raise ConfigError(
                 f"a scenario config must be a mapping of field names, got {describe(data)}"
             )
-        bad = [k for k in data if not isinstance(k, str)]
-        if bad:
-            raise ConfigError(f"config field names must be strings, got {describe(bad[0])}")
-        unknown = sorted(set(data) - _FIELDS)
-        if unknown:
-            raise ConfigError(
-                f"unknown config field(s) {unknown}; valid fields are {sorted(_FIELDS)}"
-            )
+        _check_field_names(data)
         kw = dict(data)
         scenario = kw.pop("scenario", None)
         return make_config(scenario=scenario, **kw)
@@ -557,6 +550,16 @@ def _centre_density(kwargs: dict[str, Any], old_arena: float, old_mean: tuple) -
 _DEFAULT = ScenarioConfig()
 
 
+def _check_field_names(data: Mapping[str, Any]) -> None:
+    """Every key of ``data`` is a :class:`ScenarioConfig` field name (string)."""
+    bad = [k for k in data if not isinstance(k, str)]
+    if bad:
+        raise ConfigError(f"config field names must be strings, got {describe(bad[0])}")
+    unknown = sorted(set(data) - _FIELDS)
+    if unknown:
+        raise ConfigError(f"unknown config field(s) {unknown}; valid fields are {sorted(_FIELDS)}")
+
+
 def read_config_file(
     path: str | os.PathLike, flag: str = "--config", *, validate: bool = True
 ) -> dict[str, Any]:
@@ -591,11 +594,8 @@ def read_config_file(
     try:
         if validate:
             ScenarioConfig.from_dict(data)
-        elif sorted(set(data) - _FIELDS):  # the message of from_dict
-            raise ConfigError(
-                f"unknown config field(s) {sorted(set(data) - _FIELDS)}; valid fields are "
-                f"{sorted(_FIELDS)}"
-            )
+        else:
+            _check_field_names(data)
     except ConfigError as exc:
         raise ConfigError(f"{flag} {path}: {exc}") from None
     return data

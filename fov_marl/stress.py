@@ -79,6 +79,7 @@ N = 4, 360°, clustered; ``wall_slide`` N = 8, 360°, clustered).
 from __future__ import annotations
 
 import argparse
+import collections
 import itertools
 import os
 import sys
@@ -765,7 +766,7 @@ def _cases_from_args(args: argparse.Namespace) -> list[StressCase]:
     flags = {"adversary": "--adversaries", "n_agents": "--n-agents", "fov_deg": "--fov-deg",
              "start": "--starts"}  # fmt: skip
     for k, v in given.items():
-        twice = sorted({x for x in v if list(v).count(x) > 1}, key=str)
+        twice = sorted((x for x, n in collections.Counter(v).items() if n > 1), key=str)
         if twice:  # a repeated value would run (and print) the same cases twice
             raise ValueError(f"{flags[k]} lists {', '.join(map(str, twice))} more than once")
     if args.quick or (not args.full and not given):

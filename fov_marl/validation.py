@@ -51,6 +51,7 @@ __all__ = [
     "check_seed",
     "check_budget",
     "fov_parallel_base",
+    "keyword_parameters",
     "as_real_vector",
     "holds_bool",
     "check_out_dir",
@@ -343,6 +344,18 @@ def check_params(
     fields = getattr(cls, "__dataclass_fields__", {})
     check_keys(f"{name} fields", value, fields)
     return cls(**{**base, **value})
+
+
+def keyword_parameters(fn: Any, skip: int = 1) -> tuple[str, ...] | None:
+    """The parameter names of ``fn`` after its first ``skip`` (e.g. ``self`` and the env),
+    or None when it takes ``**kwargs`` (then only ``fn`` knows what it accepts): what
+    :func:`check_keys` checks a dict of keyword options against."""
+    import inspect
+
+    params = list(inspect.signature(fn).parameters.values())[skip:]
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return None
+    return tuple(p.name for p in params if p.kind is not inspect.Parameter.VAR_POSITIONAL)
 
 
 def fov_parallel_base(name: str, env: Any, vector_hint: str = "") -> Any:

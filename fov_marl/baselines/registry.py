@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import inspect
 from collections.abc import Callable
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
+
+from fov_marl.validation import keyword_parameters
 
 __all__ = ["Policy", "register_policy", "make_policy", "available_policies"]
 
@@ -31,15 +32,6 @@ _REGISTRY: dict[str, Callable[..., Policy]] = {}
 _OPTIONS: dict[str, tuple[str, ...] | None] = {}
 
 
-def _keyword_options(fn: Callable[..., Any]) -> tuple[str, ...] | None:
-    """The keyword parameters of ``fn`` after its first (the env), or None when it takes
-    ``**kwargs`` (then only the factory knows what it accepts)."""
-    params = list(inspect.signature(fn).parameters.values())[1:]
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
-        return None
-    return tuple(p.name for p in params if p.kind is not inspect.Parameter.VAR_POSITIONAL)
-
-
 def register_policy(
     name: str, options: Callable[..., Any] | tuple[str, ...] | None = None
 ) -> Callable[[Callable[..., Policy]], Callable[..., Policy]]:
@@ -53,9 +45,9 @@ def register_policy(
     def deco(factory: Callable[..., Policy]) -> Callable[..., Policy]:
         _REGISTRY[name] = factory
         if options is None:
-            _OPTIONS[name] = _keyword_options(factory)
+            _OPTIONS[name] = keyword_parameters(factory)
         elif callable(options):
-            _OPTIONS[name] = _keyword_options(options)
+            _OPTIONS[name] = keyword_parameters(options)
         else:
             _OPTIONS[name] = tuple(options)
         return factory

@@ -115,6 +115,15 @@ def lloyd_stencil_size(radius_m: float, grid_m: float) -> float:
     return math.pi * (float(radius_m) / float(grid_m) + 1.5) ** 2
 
 
+def _check_stencil_size(radius_m: float, grid_m: float, sensing_radius_m: float, ctx: str) -> None:
+    check_budget(
+        "sensing_radius_m", sensing_radius_m, lloyd_stencil_size(radius_m, grid_m),
+        MAX_LLOYD_STENCIL, "the Lloyd stencil pi (R / lloyd_grid_m + 1.5)^2, "
+        "R = min(R_s, 1.414 L + 2 lloyd_grid_m)", "points per robot",
+        f"lloyd_grid_m = {grid_m}{ctx}; raise lloyd_grid_m or lower sensing_radius_m",
+    )  # fmt: skip
+
+
 def check_lloyd_stencil(config: ScenarioConfig, params: ControllerParams) -> None:
     """Resource guard of the Lloyd quadrature: at most ``MAX_LLOYD_STENCIL`` points.
 
@@ -125,17 +134,8 @@ def check_lloyd_stencil(config: ScenarioConfig, params: ControllerParams) -> Non
         side is at most ~48 m).
     """
     h = params.lloyd_grid_m
-    need = lloyd_stencil_size(lloyd_radius_m(config, h), h)
-    check_budget(
-        "sensing_radius_m",
-        config.sensing_radius_m,
-        need,
-        MAX_LLOYD_STENCIL,
-        "the Lloyd stencil pi (min(R_s, 1.414 L + 2 lloyd_grid_m) / lloyd_grid_m + 1.5)^2",
-        "points per robot",
-        f"lloyd_grid_m = {h}, arena_size_m = {config.arena_size_m}; raise lloyd_grid_m "
-        "or lower sensing_radius_m",
-    )
+    ctx = f", arena_size_m = {config.arena_size_m}"
+    _check_stencil_size(lloyd_radius_m(config, h), h, config.sensing_radius_m, ctx)
 
 
 @lru_cache(maxsize=16)
@@ -158,11 +158,7 @@ def lloyd_stencil(sensing_radius_m: float, grid_m: float) -> tuple[np.ndarray, n
         ConfigError: when the stencil would exceed ``MAX_LLOYD_STENCIL`` points.
     """
     h = float(grid_m)
-    check_budget(
-        "sensing_radius_m", sensing_radius_m, lloyd_stencil_size(sensing_radius_m, h),
-        MAX_LLOYD_STENCIL, "the Lloyd stencil pi (R_s / lloyd_grid_m + 1.5)^2",
-        "points per robot", f"lloyd_grid_m = {h}",
-    )  # fmt: skip
+    _check_stencil_size(sensing_radius_m, h, sensing_radius_m, "")
     n = int(math.ceil(sensing_radius_m / h)) + 1
     ax = h * np.arange(-n, n + 1)
     ox, oy = np.meshgrid(ax, ax, indexing="ij")
@@ -173,8 +169,9 @@ def lloyd_stencil(sensing_radius_m: float, grid_m: float) -> tuple[np.ndarray, n
     frac = np.ones(off.shape[0])
     # sub-cell points lie within h/√2 of the cell centre: outside this band the 256
     # samples all agree (fraction exactly 1 or 0)
-    ring = np.flatnonzero(np.abs(dist - sensing_radius_m) <= h * (math.sqrt(0.5) + 1e-9))
-    frac[dist > sensing_radius_m + h * (math.sqrt(0.5) + 1e-9)] = 0.0
+    band = h * (math.sqrt(0.5) + 1e-9)
+    ring = np.flatnonzero(np.abs(dist - sensing_radius_m) <= band)
+    frac[dist > sensing_radius_m + band] = 0.0
     sub = (np.arange(16) + 0.5) / 16 - 0.5
     sx, sy = np.meshgrid(sub, sub, indexing="ij")
     sub = h * np.stack([sx.ravel(), sy.ravel()], -1)

@@ -380,6 +380,7 @@ __all__ = [
     "bearing_angles_body",
     "bearing_travel_step",
     "bearing_travel_reset",
+    "bearings_in_view",
     "bearing_travel_rows",
     "hold_band",
     "neighbour_row_offsets",
@@ -846,6 +847,13 @@ def bearing_angles_body(k: int, yaw_rad: np.ndarray) -> np.ndarray:
     return (ang + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def bearings_in_view(ang_body_rad: np.ndarray, fov_rad: float, margin_rad: float) -> np.ndarray:
+    """Bearings (``ang_body_rad``, in Σ_i) within ``β/2 − margin`` of the camera axis,
+    1e-9 rad of round-off included: a bin whose sector ends on the view's edge is in
+    view. The one view test of the blind travel budgets (reset and rows)."""
+    return np.abs(ang_body_rad) <= 0.5 * fov_rad - margin_rad + 1e-9
+
+
 def bearing_travel_reset(
     c_m: np.ndarray, yaw_rad: np.ndarray, fov_rad: float, margin_rad: float
 ) -> np.ndarray:
@@ -860,14 +868,14 @@ def bearing_travel_reset(
     c = np.asarray(c_m, dtype=np.float64)
     if fov_rad >= 2.0 * math.pi:
         return np.zeros_like(c)
-    seen = np.abs(bearing_angles_body(c.shape[1], yaw_rad)) <= 0.5 * fov_rad - margin_rad + 1e-9
+    seen = bearings_in_view(bearing_angles_body(c.shape[1], yaw_rad), fov_rad, margin_rad)
     return np.where(seen, 0.0, c)
 
 
 def bearing_travel_rows(
     c_m: np.ndarray,
     yaw_rad: np.ndarray,
-    budget_m: float,
+    budget_m: float | np.ndarray,
     dt_s: float,
     v_max_mps: float,
     fov_rad: float | None = None,
@@ -886,8 +894,8 @@ def bearing_travel_rows(
 
     Args:
         c_m: ``(R, K)`` the approach per world bearing (m). yaw_rad: ``(R,)``.
-        budget_m: B (m). dt_s: the step (s). v_max_mps: the speed limit (m/s).
-        fov_rad: the camera amplitude β (rad), or None.
+        budget_m: B (m), or ``(R, 1)`` per robot. dt_s: the step (s). v_max_mps: the
+            speed limit (m/s). fov_rad: the camera amplitude β (rad), or None.
 
     Returns:
         ``(A (R, K, 3), b (R, K) m/s, h (R, K) m)``: ``A = [−n_k, 0]`` in Σ_i,
@@ -899,8 +907,7 @@ def bearing_travel_rows(
     left = budget_m - c
     watched = c > 0.0
     if fov_rad is not None and fov_rad < 2.0 * math.pi:
-        in_view = np.abs(ang) <= 0.5 * fov_rad - math.pi / K + 1e-9
-        watched = watched | ~in_view
+        watched = watched | ~bearings_in_view(ang, fov_rad, math.pi / K)
     on = watched & (left < v_max_mps * dt_s)
     A = np.zeros((R, K, 3))
     A[..., 0] = -np.cos(ang)
@@ -1273,21 +1280,17 @@ def safety_rows(
         blocks_b.append(np.where(on, np.maximum(0.0, left / dt_s), np.inf)[:, None])
         blocks_k.append(np.where(on, ROW_BLIND, -1).astype(np.int8)[:, None])
         blocks_h.append(np.where(on, left, np.inf)[:, None])
-        if v_max_mps * dt_s > blind_travel_m and fov_rad < 2.0 * math.pi:
+        if v_max_mps * dt_s > blind_travel_m:
             # one step could spend more than the whole budget in a direction the vector
-            # does not point along (with a zero vector: any): cap every direction outside
-            # the view, as bearing_travel_rows does for the per-bearing budget (24 bearings
-            # in Σ_i, the view's bearings exempt). Not written when v_max dt ≤ B.
-            K = 24
-            ang = bearing_angles_body(K, np.zeros(R))
-            unseen = np.abs(ang) > 0.5 * fov_rad - math.pi / K + 1e-9
-            A = np.zeros((R, K, 3))
-            A[..., 0] = -np.cos(ang)
-            A[..., 1] = -np.sin(ang)
-            h = np.where(unseen, left[:, None], np.inf)
+            # does not point along (with a zero vector: any): the per-bearing rows of 24
+            # never-approached bearings in Σ_i with the vector's remaining budget cap every
+            # direction outside the view. Not written when v_max dt ≤ B.
+            A, b, h = bearing_travel_rows(
+                np.zeros((R, 24)), np.zeros(R), left[:, None], dt_s, v_max_mps, fov_rad
+            )
             blocks_A.append(A)
-            blocks_b.append(np.where(unseen, np.maximum(0.0, left[:, None] / dt_s), np.inf))
-            blocks_k.append(np.where(unseen, ROW_BLIND, -1).astype(np.int8))
+            blocks_b.append(b)
+            blocks_k.append(np.where(np.isfinite(b), ROW_BLIND, -1).astype(np.int8))
             blocks_h.append(h)
 
     if bearing_travel_m is not None and blind_travel_m > 0.0:

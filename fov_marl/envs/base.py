@@ -11,7 +11,7 @@ per-agent infos, ``max_cycles``, rendering.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import gymnasium
@@ -33,6 +33,7 @@ __all__ = [
     "FovAECEnv",
     "FovEnvBase",
     "aec_env",
+    "forward_max_cycles",
     "scenario_config",
 ]
 
@@ -78,25 +79,26 @@ MAX_CYCLES = property(
 )
 
 
-#: ``max_cycles`` of a wrapper (``SafetyFilterWrapper``, ``BeliefObservationWrapper``):
-#: reads and sets the wrapped env's, so setting it on the wrapper truncates the episodes
-#: (a plain attribute of the wrapper would be silently ignored).
-FORWARDED_MAX_CYCLES = property(
-    lambda w: w.env.max_cycles,
-    lambda w, value: setattr(w.env, "max_cycles", value),
-    doc="The wrapped env's steps before truncation; setting it sets the wrapped env's.",
-)
+def forward_max_cycles(inner: Callable[[Any], Any]) -> property:
+    """A wrapper's ``max_cycles`` that reads and sets ``inner(wrapper).max_cycles`` (a
+    plain attribute of the wrapper would be silently ignored by the env it wraps)."""
+    return property(
+        lambda w: inner(w).max_cycles,
+        lambda w, value: setattr(inner(w), "max_cycles", value),
+        doc="The wrapped env's steps before truncation; setting it sets the wrapped env's.",
+    )
+
+
+#: ``max_cycles`` of ``SafetyFilterWrapper`` and ``BeliefObservationWrapper``: the
+#: wrapped env's
+FORWARDED_MAX_CYCLES = forward_max_cycles(lambda w: w.env)
 
 
 class FovAECEnv(OrderEnforcingWrapper):
     """PettingZoo's AEC conversion of a fov_marl ParallelEnv (``parallel_to_aec``) whose
     ``max_cycles`` reads and sets the ParallelEnv's."""
 
-    max_cycles = property(
-        lambda w: w.unwrapped.max_cycles,
-        lambda w, value: setattr(w.unwrapped, "max_cycles", value),
-        doc="Steps before truncation of the underlying ParallelEnv; settable.",
-    )
+    max_cycles = forward_max_cycles(lambda w: w.unwrapped)
 
 
 def aec_env(parallel: ParallelEnv) -> FovAECEnv:

@@ -368,7 +368,7 @@ class CoverageCore(BatchedCore):
     def _cue_scalar_high(self) -> float:
         # σ may exceed the diagonal (a nearly flat density): the observation reports it
         # as it is, like the state (the clip to the bounds must not change it)
-        return max(self.config.arena_size_m * math.sqrt(2.0), self.config.density_sigma_m)
+        return max(super()._cue_scalar_high(), self.config.density_sigma_m)
 
     def _rewards_and_metrics(
         self, idx: Any, col_i: np.ndarray, viol_i: np.ndarray, metrics: dict, reset: bool

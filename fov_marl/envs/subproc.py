@@ -460,13 +460,14 @@ class SubprocVectorEnv:
         return self._all("get", name)
 
     def set_attr(self, name: str, value: Any) -> None:
-        """Set attribute ``name`` of every shard's vector env to ``value``."""
+        """Set attribute ``name`` of every shard's vector env to ``value``; a property of
+        this class (``max_cycles``) is set through it (validated once, here)."""
         if not isinstance(name, str):
             raise ValueError(f"name must be a str, got {describe(name)}")
-        if name == "max_cycles":  # validated here, once, before any shard sees it
-            self.max_cycles = value
-            return
-        self._all("set", (name, value))
+        if isinstance(getattr(type(self), name, None), property):
+            setattr(self, name, value)
+        else:
+            self._all("set", (name, value))
 
     @property
     def shard_starts(self) -> tuple[int, ...]:

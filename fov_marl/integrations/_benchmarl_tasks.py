@@ -53,12 +53,11 @@ class FovMarlClass(PettingZooClass):
         """The validated scenario config of the task's current ``config`` (read anew:
         ``task.config.update({...})``, BenchMARL's way to change a task, is seen)."""
         if "scenario" in self.config:
+            given = self.config["scenario"]
+            hint = f"; use FovMarlTask.{given.upper()}" if given in ("coverage", "crossing") else ""
             raise ValueError(
-                f"task config: the scenario is fixed by the task ({self.name}), got scenario="
-                f"{self.config['scenario']!r}; use FovMarlTask.{str(self.config['scenario']).upper()}"
-                if self.config["scenario"] in ("coverage", "crossing")
-                else f"task config: the scenario is fixed by the task ({self.name}), got "
-                f"scenario={self.config['scenario']!r}"
+                f"task config: the scenario is fixed by the task ({self.name}), got "
+                f"scenario={given!r}{hint}"
             )
         fields = {k: v for k, v in self.config.items() if k not in WRAPPER_KEYS}
         return make_config(scenario=self.scenario, **fields)

@@ -47,7 +47,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from fov_marl.integrations.common import require
-from fov_marl.validation import check_int, describe
+from fov_marl.validation import MAX_SEED, check_int, describe
 
 __all__ = ["ALGORITHMS", "FovMarlClass", "FovMarlTask", "make_experiment"]  # noqa: F822
 
@@ -109,7 +109,7 @@ def make_experiment(
 
     from fov_marl.integrations._benchmarl_tasks import FovMarlClass, FovMarlTask
 
-    seed = check_int("seed", seed, 0, 2**31 - 1)
+    seed = check_int("seed", seed, 0, MAX_SEED)
     if task is None:
         task = FovMarlTask.COVERAGE
     if isinstance(task, str):

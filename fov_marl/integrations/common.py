@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import inspect
 from collections.abc import Mapping
 from typing import Any
 
-from fov_marl.validation import describe
+from fov_marl.validation import describe, keyword_parameters
 
 __all__ = ["SCENARIOS", "make_parallel_env", "require"]
 
@@ -58,7 +57,7 @@ def make_parallel_env(
             raise ValueError(f"{name} must be a dict or None, got {describe(kw)}")
         if kw and not on:  # set, but the wrapper is off: it would be silently ignored
             raise ValueError(f"{name} needs {flag}=True, got {dict(kw)!r} with {flag}=False")
-        valid = [p for p in inspect.signature(cls.__init__).parameters if p not in ("self", "env")]
+        valid = keyword_parameters(cls.__init__, skip=2)  # after self and env
         unknown = sorted(str(k) for k in kw if k not in valid)
         if unknown:
             raise ValueError(f"unknown {name} key(s) {unknown}; valid keys are {sorted(valid)}")

@@ -28,7 +28,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from fov_marl.integrations.common import make_parallel_env, require
-from fov_marl.validation import check_int, check_real, describe
+from fov_marl.validation import MAX_SEED, check_int, check_real, describe
 
 __all__ = ["ENV_NAME", "POLICY_ID", "make_rllib_env", "ppo_config", "register_rllib_env"]
 
@@ -108,7 +108,7 @@ def ppo_config(
         raise ValueError(f"hidden must be a non-empty sequence of layer sizes, got {hidden!r}")
     hidden = tuple(check_int(f"hidden[{i}]", h, 1, 65536) for i, h in enumerate(hidden))
     if seed is not None:
-        seed = check_int("seed", seed, 0, 2**31 - 1, note="(or None)")
+        seed = check_int("seed", seed, 0, MAX_SEED, note="(or None)")
     env_config = dict(env_config or {})
     _parallel_env(env_config).close()  # a bad field fails here, not in a worker
     require("ray.rllib", "rllib")

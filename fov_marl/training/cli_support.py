@@ -429,13 +429,11 @@ def run_train(args: argparse.Namespace) -> Path | int:
     else:
         print(f"train: {done_at} timesteps", flush=True)
     slots = args.n_envs * n_agents
-    if args.checkpoint_every and checkpoint_period(args.checkpoint_every, slots) != (
-        args.checkpoint_every
-    ):
+    period = checkpoint_period(args.checkpoint_every, slots)
+    if args.checkpoint_every and period != args.checkpoint_every:
         print(
-            f"train: --checkpoint-every {args.checkpoint_every} saves every "
-            f"{checkpoint_period(args.checkpoint_every, slots)} timesteps (a multiple of the "
-            f"{slots} timesteps of one vector step)",
+            f"train: --checkpoint-every {args.checkpoint_every} saves every {period} "
+            f"timesteps (a multiple of the {slots} timesteps of one vector step)",
             flush=True,
         )
     try:

@@ -47,6 +47,7 @@ import numpy as np
 from fov_marl.config import ScenarioConfig
 from fov_marl.control import ControllerParams
 from fov_marl.control.batched import CONTROL_STATUSES
+from fov_marl.envs.base import forward_max_cycles
 from fov_marl.envs.subproc import build_raw_vector_env
 from fov_marl.envs.vector import check_vector_actions, vector_seeds
 from fov_marl.estimation import TrackerParams
@@ -126,14 +127,7 @@ class VectorSafetyFilterWrapper:
     def unwrapped(self) -> Any:
         return getattr(self.venv, "unwrapped", self.venv)
 
-    @property
-    def max_cycles(self) -> int:
-        """The wrapped env's episode length; setting it sets the wrapped env's."""
-        return int(self.venv.max_cycles)
-
-    @max_cycles.setter
-    def max_cycles(self, value: int) -> None:
-        self.venv.max_cycles = value
+    max_cycles = forward_max_cycles(lambda w: w.venv)
 
     def reset(self, seed: Any = None, options: dict | None = None):
         """Reset the env and the filters. ``seed``: an int s (copy k and its filters from
