@@ -46,7 +46,6 @@ __all__ = ["main", "build_parser", "format_table", "CliError"]
 
 _PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
 
-#: --seed range: every consumer (NumPy, stable-baselines3's np.random.seed) takes it
 #: render keeps its frames in memory (640 x 640 x 3 bytes each): at most this many
 MAX_RENDER_FRAMES = 1000
 

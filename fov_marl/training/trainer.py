@@ -975,9 +975,17 @@ def train(
             try:
                 model.set_parameters(str(init_from), exact_match=True, device="cpu")
             except _LOAD_ERRORS as exc:
+                this_run = {
+                    "algo": algo,
+                    "arch": arch,
+                    "ctde": bool(ctde),
+                    "belief": bool(belief),
+                    "n_agents": n_agents,
+                    "hyperparams.policy_kwargs": _jsonable(hp.get("policy_kwargs")),
+                }
                 raise ValueError(
                     f"init_from {init_from}: not a model of this architecture and these "
-                    f"spaces ({_reason(exc)})"
+                    f"spaces ({_init_mismatch(init_from, this_run, exc)})"
                 ) from None
         formats: list[Any] = [
             TensorBoardOutputFormat(str(_next_run_dir(out / "tb", algo.upper()))),
@@ -1004,8 +1012,10 @@ def train(
             with warnings.catch_warnings():
                 # SB3's bar is tqdm.rich, which warns that it is experimental
                 warnings.filterwarnings("ignore", message=".*rich is experimental.*")
+                # the whole rollouts SB3 runs anyway (the same training: the learning
+                # rate and clip range are constants), so its progress bar ends at 100%
                 model.learn(
-                    total_timesteps=int(timesteps),
+                    total_timesteps=effective_timesteps(algo, timesteps, venv.num_envs, hp),
                     callback=CallbackList(callbacks),
                     progress_bar=progress_bar,
                 )
@@ -1267,6 +1277,34 @@ def _read_config(path: Path) -> dict[str, Any]:
     except ConfigError as exc:
         raise ValueError(f"{path}: {exc}") from None
     return config
+
+
+def _init_mismatch(init_from: Path, this_run: dict[str, Any], exc: BaseException) -> str:
+    """Why ``init_from`` does not fit this run, short: the settings that differ, read from
+    the ``config.json`` saved beside it (``n_agents`` only where the MLP's input size
+    depends on it), else the loader's message cut to 200 characters."""
+    try:
+        saved = json.loads((init_from.parent / "config.json").read_text())
+    except (OSError, ValueError):
+        saved = None
+    if isinstance(saved, dict):
+        saved_hp = saved.get("hyperparams")
+        saved = {
+            **saved,
+            "hyperparams.policy_kwargs": (
+                saved_hp.get("policy_kwargs") if isinstance(saved_hp, dict) else None
+            ),
+        }
+        skip = {"n_agents"} if this_run.get("arch") == "set" else set()
+        diff = [
+            f"{key} {saved[key]!r} there, {value!r} here"
+            for key, value in this_run.items()
+            if key in saved and key not in skip and saved[key] != value
+        ]
+        if diff:
+            return "; ".join(diff)
+    text = _reason(exc)
+    return text if len(text) <= 200 else text[:197] + "..."
 
 
 def _reason(exc: BaseException) -> str:

@@ -329,9 +329,20 @@ TINY_CLI = [
 ]
 
 
-def test_timesteps_rounding_is_printed_and_matches_what_ran(tmp_path, capsys):
+def test_timesteps_rounding_is_printed_and_matches_what_ran(tmp_path, capsys, monkeypatch):
+    from stable_baselines3 import PPO
+
     from fov_marl.cli import main
     from fov_marl.training.trainer import effective_timesteps
+
+    asked = []
+    learn = PPO.learn
+
+    def spy(self, total_timesteps, *args, **kwargs):
+        asked.append(total_timesteps)
+        return learn(self, total_timesteps, *args, **kwargs)
+
+    monkeypatch.setattr(PPO, "learn", spy)
 
     # whole PPO rollouts of n_steps 64 x 1 copy x 2 robots = 128 samples
     assert effective_timesteps("ppo", 1000, 2, {"n_steps": 64}) == 1024
@@ -343,6 +354,37 @@ def test_timesteps_rounding_is_printed_and_matches_what_ran(tmp_path, capsys):
     assert "--timesteps 1000 runs 1024 timesteps" in out and "n_steps 64" in out
     cfg = json.loads((tmp_path / "r" / "config.json").read_text())
     assert cfg["timesteps_done"] == 1024 and cfg["n_envs"] == 1  # --num-envs is --n-envs
+    # SB3 is told what it runs, so its progress bar ends at 1024/1024, not 1024/1000
+    assert asked == [1024]
+
+
+def test_init_from_a_model_that_does_not_fit_names_what_differs(tmp_path, capsys):
+    """One short line: the settings that differ (read from the config.json beside the
+    model), or, for a bare model.zip, the loader's message cut short (it listed every
+    parameter name of the network)."""
+    import shutil
+
+    from fov_marl.cli import main
+
+    assert main([*TINY_CLI, "--timesteps", "128", "--out", str(tmp_path / "mlp")]) == 0
+    capsys.readouterr()
+    run = [*TINY_CLI, "--timesteps", "128", "--init-from", str(tmp_path / "mlp" / "model.zip")]
+    for extra, says in (
+        (["--arch", "set"], "arch 'mlp' there, 'set' here"),
+        (["--belief"], "belief False there, True here"),
+        (["--n-agents", "3"], "n_agents 2 there, 3 here"),
+    ):
+        assert main([*run, *extra, "--out", str(tmp_path / "b")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "--init-from" in err and says in err, err
+        assert len(err) < 250, err
+    (tmp_path / "bare").mkdir()
+    shutil.copy(tmp_path / "mlp" / "model.zip", tmp_path / "bare" / "model.zip")
+    bare = [*TINY_CLI, "--timesteps", "128", "--init-from", str(tmp_path / "bare" / "model.zip")]
+    assert main([*bare, "--arch", "set", "--out", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "RuntimeError" in err and err.endswith("...)"), err
+    assert len(err) < 450, err
 
 
 def test_out_holding_a_model_needs_force(tmp_path, capsys):
