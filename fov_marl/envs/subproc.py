@@ -56,20 +56,28 @@ shards (CPU time, not wall time), where the shards have it. :meth:`get_attr`,
 Errors. Actions are checked here (shape, dtype, finite) with the messages of the
 vector env. A ``ValueError`` or ``AttributeError`` raised in a worker is raised again
 here with its message;
-any other exception becomes a ``RuntimeError`` carrying the worker's traceback. A worker
-that dies makes the next call raise ``RuntimeError``. Workers ignore SIGINT: Ctrl-C
-reaches the parent only, which can still close them (``fov-marl train`` saves its model
-on Ctrl-C). ``close()`` is idempotent; the env is a context manager.
+any other exception becomes a ``RuntimeError`` carrying the worker's traceback. An
+argument that cannot be pickled is a ``ValueError`` before any worker sees the command.
+A worker that dies makes the next call raise ``RuntimeError``. Workers ignore SIGINT:
+Ctrl-C reaches the parent only. A call it interrupts leaves the pipes in order (every
+message is sent and read whole, with SIGINT and SIGALRM handled right after it, and
+answers carry their command's number, so the next call discards stale ones): the env
+can step on or be closed (``fov-marl train`` saves its model on Ctrl-C); the shards
+that had received an interrupted ``step`` have stepped. ``close()`` is idempotent; the
+env is a context manager.
 """
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import pickle
 import signal
+import threading
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from functools import partial
+from multiprocessing.reduction import ForkingPickler
 from typing import Any
 
 import gymnasium
@@ -137,36 +145,50 @@ def _error(exc: BaseException) -> tuple[str, str, str, int]:
     return type(exc).__name__, str(exc), traceback.format_exc(), kind
 
 
+#: what a shard's vector env must have (sent to the parent once built)
+_STATIC = (
+    "num_envs",
+    "n_agents",
+    "config",
+    "possible_agents",
+    "single_observation_space",
+    "single_action_space",
+    "max_cycles",
+    "metadata",
+)
+
+
 def _worker(conn: Any, make_vector: Callable[[int], Any], num_envs: int) -> None:
-    """A shard's process: build its vector env, then serve commands until ``close``."""
+    """A shard's process: build its vector env, then serve commands until ``close``.
+
+    Protocol: the parent sends ``(seq, blob)``, ``blob`` the pickled ``(cmd, arg)``; the
+    worker answers ``(seq, status, payload)`` for every command it receives, in order
+    (its first answer, seq 0, is the shard's static attributes). A command whose blob
+    cannot be unpickled here is answered with its error.
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         venv = make_vector(num_envs)
-        static = {
-            name: getattr(venv, name)
-            for name in (
-                "num_envs",
-                "n_agents",
-                "config",
-                "possible_agents",
-                "single_observation_space",
-                "single_action_space",
-                "max_cycles",
-                "metadata",
+        missing = [name for name in _STATIC if not hasattr(venv, name)]
+        if missing:
+            raise ValueError(
+                f"make_vector({num_envs}) must return a vector env, got {describe(venv)} "
+                f"(it has no {missing[0]!r})"
             )
-        }
+        static = {name: getattr(venv, name) for name in _STATIC}
     except BaseException as exc:  # noqa: BLE001 - reported to the parent
-        conn.send(("error", _error(exc)))
+        conn.send((0, "error", _error(exc)))
         conn.close()
         return
     static["per_copy_wrappers"] = tuple(getattr(venv, "per_copy_wrappers", ()))
-    conn.send(("ok", static))
+    conn.send((0, "ok", static))
     while True:
         try:
-            cmd, arg = conn.recv()
+            seq, blob = conn.recv()
         except (EOFError, OSError):  # the parent is gone
             break
         try:
+            cmd, arg = pickle.loads(blob)
             if cmd == "step":
                 out: Any = (*venv.step(arg), getattr(venv, "last_cpu_s", None))
             elif cmd == "reset":
@@ -183,14 +205,51 @@ def _worker(conn: Any, make_vector: Callable[[int], Any], num_envs: int) -> None
                 close = getattr(venv, "close", None)
                 if close is not None:
                     close()
-                conn.send(("ok", None))
+                conn.send((seq, "ok", None))
                 break
             else:
                 raise ValueError(f"unknown command {cmd!r}")
-            conn.send(("ok", out))
+            reply = ForkingPickler.dumps((seq, "ok", out))
         except BaseException as exc:  # noqa: BLE001 - reported to the parent
-            conn.send(("error", _error(exc)))
+            reply = ForkingPickler.dumps((seq, "error", _error(exc)))
+        try:
+            conn.send_bytes(reply)
+        except (EOFError, OSError):  # the parent is gone
+            break
     conn.close()
+
+
+#: signals whose Python handler may raise in the parent (Ctrl-C, alarm-based timeouts):
+#: deferred while a message is on the pipe, so a message is never half sent or half read
+_DEFERRED_SIGNALS = tuple(
+    getattr(signal, name) for name in ("SIGINT", "SIGALRM") if hasattr(signal, name)
+)
+
+
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Run the block with the Python handlers of :data:`_DEFERRED_SIGNALS` held back: a
+    signal that arrives meanwhile is handled (e.g. ``KeyboardInterrupt`` raised) right
+    after the block. Only the main thread runs Python signal handlers, so elsewhere
+    nothing is deferred (nothing can interrupt the block there)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[tuple[int, Any]] = []
+    saved: list[tuple[int, Any]] = []
+    for sig in _DEFERRED_SIGNALS:
+        old = signal.getsignal(sig)
+        if callable(old):
+            saved.append((sig, old))
+            signal.signal(sig, lambda signum, frame: caught.append((signum, frame)))
+    try:
+        yield
+    finally:
+        for sig, old in saved:
+            signal.signal(sig, old)
+        for signum, frame in caught:
+            handler = dict(saved)[signum]
+            handler(signum, frame)
 
 
 def _concat(parts: list[Any], key: str) -> Any:
@@ -280,10 +339,14 @@ class SubprocVectorEnv:
             child.close()
             self._conns.append(parent)
             self._procs.append(proc)
-        self._pending = [1] * self.workers  # each worker answers once built
+        # the protocol of _worker: command seq numbers sent to / answered by each worker
+        # (each worker answers seq 0 once built)
+        self._seq = 0
+        self._sent = [0] * self.workers
+        self._answered = [-1] * self.workers
         self._closed = False
         try:
-            statics = self._recv_all()
+            statics = self._recv_all(0)
         except BaseException:
             self.close()
             raise
@@ -321,49 +384,84 @@ class SubprocVectorEnv:
         if self._closed:
             raise ValueError("the SubprocVectorEnv is closed")
 
+    def _next_answer(self, w: int) -> tuple[int, str, Any]:
+        """Worker w's next answer ``(seq, status, payload)``. The wait can be interrupted
+        (Ctrl-C) and leaves nothing half read: the message is read with the signals
+        deferred (:func:`_signals_deferred`), together with the count of answers."""
+        conn = self._conns[w]
+        conn.poll(None)  # interruptible; consumes nothing
+        with _signals_deferred():
+            msg = conn.recv()
+            self._answered[w] = msg[0]
+        return msg
+
     def _drain(self) -> None:
         """Discard the answers of commands whose caller stopped waiting (Ctrl-C during a
         step): every worker finishes its command and answers; the next command must not
-        read that stale answer."""
-        for w, n in enumerate(self._pending):
-            while n > 0:
+        read that stale answer (nor block on a pipe the stale answer fills)."""
+        for w in range(self.workers):
+            while self._answered[w] < self._sent[w]:
                 try:
-                    self._conns[w].recv()
+                    self._next_answer(w)
                 except (EOFError, OSError):
                     break
-                n -= 1
-            self._pending[w] = 0
 
     def _broadcast(self, cmd: str, args: list[Any]) -> list[Any]:
-        """Send ``(cmd, args[w])`` to every worker w, then collect their answers."""
+        """Send ``(cmd, args[w])`` to every worker w, then collect their answers.
+
+        Every argument is pickled before anything is sent: one that cannot be is a
+        ``ValueError`` and no worker sees the command. A command interrupted while it is
+        sent or answered (Ctrl-C) leaves the protocol in order: the next command first
+        discards the stale answers (:meth:`_drain`). The copies of the shards that had
+        received an interrupted ``step`` have stepped, the others have not.
+        """
         self._check_open()
-        self._drain()
-        for w, arg in enumerate(args):
-            self._pending[w] += 1
+        blobs = []
+        for arg in args:
             try:
-                self._conns[w].send((cmd, arg))
+                blobs.append(ForkingPickler.dumps((cmd, arg)))
+            except Exception as exc:  # noqa: BLE001 - any pickling failure
+                raise ValueError(
+                    f"the arguments of {cmd!r} must be picklable to reach the worker "
+                    f"processes: {type(exc).__name__}: {exc}"
+                ) from None
+        self._drain()
+        self._seq += 1
+        seq = self._seq
+        for w, blob in enumerate(blobs):
+            try:
+                with _signals_deferred():
+                    self._conns[w].send((seq, bytes(blob)))
+                    self._sent[w] = seq
             except (BrokenPipeError, OSError):
                 raise RuntimeError(
                     f"worker {w} of the SubprocVectorEnv has exited "
                     f"(exit code {self._procs[w].exitcode})"
                 ) from None
-        return self._recv_all()
+        return self._recv_all(seq)
 
-    def _recv_all(self) -> list[Any]:
-        """Every shard's answer, in order; the first error is raised after all answered."""
+    def _recv_all(self, seq: int) -> list[Any]:
+        """Every shard's answer to command ``seq``, in order (older answers are
+        discarded); the first error is raised after all answered."""
         results: list[Any] = []
         error: BaseException | None = None
-        for w, conn in enumerate(self._conns):
+        for w in range(self.workers):
             try:
-                status, payload = conn.recv()
-                self._pending[w] -= 1
+                while True:
+                    got, status, payload = self._next_answer(w)
+                    if got == seq:
+                        break
             except (EOFError, OSError):
-                self._pending[w] = 0
+                self._answered[w] = self._sent[w]  # nothing more will come
                 self._procs[w].join(timeout=1.0)
+                hint = (
+                    "; a script that starts workers needs the 'if __name__ == \"__main__\":' guard"
+                    if seq == 0
+                    else ""
+                )
                 error = error or RuntimeError(
                     f"worker {w} of the SubprocVectorEnv has exited "
-                    f"(exit code {self._procs[w].exitcode}); a script that starts workers "
-                    "needs the 'if __name__ == \"__main__\":' guard"
+                    f"(exit code {self._procs[w].exitcode}){hint}"
                 )
                 results.append(None)
                 continue
@@ -491,15 +589,19 @@ class SubprocVectorEnv:
         if self._closed:
             return
         self._closed = True
+        blob = bytes(ForkingPickler.dumps(("close", None)))
         for conn in self._conns:
             try:
-                conn.send(("close", None))
+                with _signals_deferred():
+                    conn.send((-1, blob))
             except (BrokenPipeError, OSError):
                 pass
         for conn, proc in zip(self._conns, self._procs, strict=True):
-            try:
-                if conn.poll(CLOSE_TIMEOUT_S):
-                    conn.recv()
+            try:  # stale answers first, then the close's (or the end of the pipe)
+                while conn.poll(CLOSE_TIMEOUT_S):
+                    with _signals_deferred():
+                        if conn.recv()[0] == -1:
+                            break
             except (EOFError, OSError):
                 pass
             proc.join(timeout=CLOSE_TIMEOUT_S)

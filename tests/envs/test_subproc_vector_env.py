@@ -180,13 +180,92 @@ def test_copies_pickles_and_interrupted_calls_leave_the_env_working():
                 fn(sub)
         _assert_same_step(one.reset(seed=1), sub.reset(seed=1))
         act = np.zeros((3, N, 3))
-        for w in range(sub.workers):  # what a step interrupted before its answers leaves
-            sub._conns[w].send(("step", act[sub._starts[w] : sub._starts[w + 1]]))
-            sub._pending[w] += 1
+        sub._seq += 1  # what a step interrupted before its answers leaves
+        for w in range(sub.workers):
+            blob = pickle.dumps(("step", act[sub._starts[w] : sub._starts[w + 1]]))
+            sub._conns[w].send((sub._seq, blob))
+            sub._sent[w] = sub._seq
         one.step(act)
         np.testing.assert_array_equal(sub.num_steps, one.num_steps)  # not the stale step
         np.testing.assert_array_equal(sub.poses, one.poses)
         _assert_same_step(one.step(act), sub.step(act))
+
+
+_INTERRUPTED = """
+import signal, sys, time
+import numpy as np
+from fov_marl.envs import fov_coverage_v0
+
+def interrupt(*_):
+    raise KeyboardInterrupt
+
+if __name__ == "__main__":
+    sub = fov_coverage_v0.vector_env(num_envs=8, n_agents=4, workers=2, max_cycles=10**6)
+    one = fov_coverage_v0.vector_env(num_envs=8, n_agents=4, max_cycles=10**6)
+    sub.reset(seed=0)
+    a = np.zeros((8, 4, 3))
+    rng = np.random.default_rng(int(sys.argv[1]))
+    signal.signal(signal.SIGALRM, interrupt)
+    hits, t_end = 0, time.time() + 4.0
+    while time.time() < t_end:
+        call = sub.step if rng.random() < 0.8 else sub.get_attr
+        arg = a if call == sub.step else "poses"
+        try:
+            try:
+                signal.setitimer(signal.ITIMER_REAL, rng.uniform(0.0001, 0.005))
+                call(arg)
+            finally:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+        except KeyboardInterrupt:
+            hits += 1
+        sub.step(a)  # after an interrupted call: the next one works
+    # in step with its commands: reset and a step give the one-process numbers
+    r_sub, r_one = sub.reset(seed=3), one.reset(seed=3)
+    assert np.array_equal(r_sub[0], r_one[0])
+    act = rng.uniform(-1, 1, (8, 4, 3))
+    assert np.array_equal(sub.step(act)[0], one.step(act)[0])
+    sub.close()
+    print("ok", hits)
+"""
+
+
+def test_calls_interrupted_at_random_moments_leave_the_protocol_in_step(tmp_path):
+    """Ctrl-C (here: a timer raising KeyboardInterrupt) lands anywhere in a call, also
+    while a message is on the pipe: the next call neither hangs nor reads a stale or
+    half-read answer (before: a hang in the answer count, or a worker reported dead)."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "interrupted.py"
+    script.write_text(_INTERRUPTED)
+    for seed in (0, 1):
+        done = subprocess.run(
+            [sys.executable, str(script), str(seed)], capture_output=True, text=True, timeout=120
+        )
+        assert done.returncode == 0, done.stderr[-2000:]
+        ok, hits = done.stdout.split()
+        assert ok == "ok" and int(hits) > 20  # the interrupts did land
+
+
+def _none(n: int):
+    return None
+
+
+def test_unpicklable_arguments_and_non_envs_are_value_errors():
+    """An argument that cannot reach the workers is a ValueError and the env keeps
+    serving (before: every later call blocked forever); a make_vector that returns no
+    vector env is a ValueError (before: AttributeError)."""
+    make = functools.partial(build_raw_vector_env, config=make_config(n_agents=N))
+    with SubprocVectorEnv(make, 2, 2) as sub:
+        sub.reset(seed=0)
+        with pytest.raises(ValueError, match="picklable"):
+            sub.set_attr("callback", lambda obs: obs)
+        with pytest.raises(ValueError, match="picklable"):
+            sub.reset(seed=1, options={"callback": lambda: 0})
+        assert sub.step(np.zeros((2, N, 3)))[0].shape[:2] == (2, N)
+        np.testing.assert_array_equal(sub.num_steps, [1, 1])
+    with pytest.raises(ValueError, match=r"must return a vector env, got None"):
+        SubprocVectorEnv(_none, 2, 2)
 
 
 def test_bad_arguments_and_worker_failures_raise_clear_errors():
@@ -248,8 +327,9 @@ def test_bad_arguments_and_worker_failures_raise_clear_errors():
         # a worker that dies: the next call says so
         os.kill(sub._procs[1].pid, signal.SIGKILL)
         sub._procs[1].join(timeout=10)
-        with pytest.raises(RuntimeError, match="worker 1"):
+        with pytest.raises(RuntimeError, match="worker 1") as died:
             sub.step(np.zeros((3, N, 3)))
+        assert "__main__" not in str(died.value)  # that hint is for a worker never built
     finally:
         sub.close()
     sub.close()  # idempotent
