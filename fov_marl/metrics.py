@@ -606,6 +606,12 @@ def eta_single_disk_at_mean(config: ScenarioConfig) -> float:
 
 
 # --------------------------------------------------------------------------- cheaper η
+#: chord ends of :class:`StripCoverageMetric` are rounded to multiples of 1 / this (m)
+_KEY_GRID = float(2**24)
+#: keys below this are exact on that grid (ulp ≤ 2^-24 below 2^29)
+_EXACT_KEY_LIMIT = float(2**29)
+
+
 class StripCoverageMetric:
     """A cheaper η (Eq. 21) for training rewards: strips in y, exact Gaussian mass in x.
 
@@ -660,6 +666,10 @@ class StripCoverageMetric:
         self._r2 = R * R
         self._row_offsets = np.arange(math.floor(2.0 * R / self.row_m) + 4)
 
+    def _key_width(self) -> float:
+        """The integer offset between two groups' sort keys (m): more than any chord end."""
+        return float(math.ceil(2.0 * self.arena_size_m + 1.0))
+
     def _half_area(self, u: np.ndarray) -> np.ndarray:
         """``∫₀ᵘ sqrt(R² − t²) dt`` for ``|u| ≤ R`` (half the disk area below height u)."""
         R = self.sensing_radius_m
@@ -682,6 +692,10 @@ class StripCoverageMetric:
 
     def _eta_batch(self, p: np.ndarray) -> np.ndarray:
         B = p.shape[0]
+        # the copies in chunks whose sort keys stay exact (below)
+        per = max(1, int(_EXACT_KEY_LIMIT // (self._key_width() * self.n_rows)) - 1)
+        if B > per:
+            return np.concatenate([self._eta_batch(p[k : k + per]) for k in range(0, B, per)])
         out = np.zeros(B)
         if p.shape[1] == 0:
             return out
@@ -705,11 +719,16 @@ class StripCoverageMetric:
         if not keep.any():
             return out
         group, a, b = group[keep], a[keep], b[keep]
-        # union of chords per (copy, strip): sort by (group, start) with one float key
-        # (offsets of width 2L keep groups apart; round-off ~1e-9 m at B·n_y = 4e5),
-        # clip each start against the running maximum of the previous ends.
-        off = group * (2.0 * L + 1.0)
-        order = np.argsort(off + a)
+        # union of chords per (copy, strip): sort by (group, start) with one float key,
+        # clip each start against the running maximum of the previous ends. The chord
+        # ends are put on a 2^-24 m grid and the groups apart by an integer width, so
+        # every key and every key minus its offset is exact: a copy's η does not depend
+        # on its index in the batch (nor on the other copies; SubprocVectorEnv shards),
+        # and the stable sort orders ties as in the copy alone.
+        a = np.round(a * _KEY_GRID) / _KEY_GRID
+        b = np.round(b * _KEY_GRID) / _KEY_GRID
+        off = group * self._key_width()
+        order = np.argsort(off + a, kind="stable")
         off, a, b, group = off[order], a[order], b[order], group[order]
         end = off + b
         prev = np.empty_like(end)

@@ -62,11 +62,17 @@ def _run_both(make, B: int, workers: int, steps: int, seed: int = 5) -> int:
 
 
 @pytest.mark.parametrize(
-    ("scenario", "B", "workers"), [("coverage", 5, 2), ("crossing", 4, 3), ("coverage", 3, 3)]
+    ("scenario", "B", "workers", "eta"),
+    [
+        ("coverage", 5, 2, "exact"),
+        ("crossing", 4, 3, "exact"),
+        ("coverage", 3, 3, "exact"),
+        ("coverage", 6, 2, "strip"),  # the strip η of a copy did depend on its batch
+    ],
 )
-def test_raw_shards_are_bit_identical_to_one_process_across_auto_resets(scenario, B, workers):
+def test_raw_shards_are_bit_identical_to_one_process_across_auto_resets(scenario, B, workers, eta):
     cfg = make_config(scenario=scenario, n_agents=N)
-    make = functools.partial(build_raw_vector_env, config=cfg, max_cycles=7)
+    make = functools.partial(build_raw_vector_env, config=cfg, max_cycles=7, eta_method=eta)
     assert _run_both(make, B, workers, steps=16) >= 2 * B  # every copy reset at least twice
 
 
