@@ -127,15 +127,18 @@ def env(render_mode: str | None = None, **config: Any) -> FovAECEnv:
 
 
 def vector_env(
-    num_envs: int = 1, workers: int = 1, **config: Any
+    num_envs: int = 1, eta_method: str = "exact", workers: int = 1, **config: Any
 ) -> FovVectorEnv | SubprocVectorEnv:
     """``num_envs`` copies stepped together over arrays (see :mod:`fov_marl.envs.vector`).
 
     Copy k after ``reset(seed=s)`` is bit-identical to ``parallel_env(**config)`` after
     ``reset(seed=s + k)`` under the same actions; finished copies reset automatically
     in the same step. Keywords are :class:`~fov_marl.config.ScenarioConfig` fields.
-    ``workers = W > 1`` steps the copies in W processes
+    ``eta_method``: ``"exact"`` only (the keyword of ``fov_coverage_v0.vector_env``; the
+    crossing reward does not use η). ``workers = W > 1`` steps the copies in W processes
     (:class:`~fov_marl.envs.subproc.SubprocVectorEnv`, the same numbers; call
     ``close()`` when done).
     """
-    return make_vector_env("crossing", "fov_crossing_v0", num_envs, config, workers=workers)
+    return make_vector_env(
+        "crossing", "fov_crossing_v0", num_envs, config, workers=workers, eta_method=eta_method
+    )

@@ -583,6 +583,10 @@ class SubprocVectorEnv:
     def unwrapped(self) -> SubprocVectorEnv:
         return self
 
+    def render(self) -> None:
+        """Draws nothing (``render_mode`` None), like :meth:`FovVectorEnv.render`."""
+        FovVectorEnv.render(self)  # type: ignore[arg-type]
+
     # --------------------------------------------------------------- close
     def close(self) -> None:
         """Stop the workers (idempotent)."""

@@ -177,15 +177,19 @@ class FovVectorEnv:
         self.n_agents = N = config.n_agents
         self.max_cycles = config.max_cycles
         self.possible_agents = [f"robot_{i}" for i in range(N)]
-        if scenario == "coverage":
-            self._core: BatchedCore = CORES[scenario](config, num_envs=B, eta_method=eta_method)
-        elif eta_method != "exact":
+        if scenario != "coverage" and eta_method != "exact":
             raise ValueError(
                 f"eta_method applies to the coverage scenario only; {name} takes 'exact', "
                 f"got {eta_method!r}"
             )
-        else:
-            self._core = CORES[scenario](config, num_envs=B)
+        kw = {"eta_method": eta_method} if scenario == "coverage" else {}
+        try:
+            self._core: BatchedCore = CORES[scenario](config, num_envs=B, **kw)
+        except MemoryError as exc:
+            raise ValueError(
+                f"num_envs = {B} copies of {config.n_agents} robots do not fit in memory "
+                f"({exc}); use fewer copies"
+            ) from None
         self.eta_method = eta_method
         core = self._core
         self.single_observation_space = gymnasium.spaces.Box(
@@ -289,6 +293,41 @@ class FovVectorEnv:
     def state(self) -> np.ndarray:
         """``(B, S)`` float32 global states (each row as the ParallelEnv's ``state()``)."""
         return self._core.state()
+
+    # ------------------------------------------------------------ attributes
+    # The shard API of SubprocVectorEnv, so code runs unchanged with workers = 1: this
+    # env is one shard holding every copy.
+    @property
+    def shard_starts(self) -> tuple[int, ...]:
+        """``(0, B)``: one shard holding every copy (see ``SubprocVectorEnv``)."""
+        return (0, self.num_envs)
+
+    def get_attr(self, name: str) -> list[Any]:
+        """``[getattr(self, name)]``: one value per shard (here one)."""
+        if not isinstance(name, str):
+            raise ValueError(f"name must be a str, got {describe(name)}")
+        return [getattr(self, name)]
+
+    def set_attr(self, name: str, value: Any) -> None:
+        """``setattr(self, name, value)`` (every shard's, here one)."""
+        if not isinstance(name, str):
+            raise ValueError(f"name must be a str, got {describe(name)}")
+        setattr(self, name, value)
+
+    def call(self, name: str, *args: Any, **kwargs: Any) -> list[Any]:
+        """``[self.name(*args, **kwargs)]``: one result per shard (here one)."""
+        if not isinstance(name, str):
+            raise ValueError(f"name must be a str, got {describe(name)}")
+        return [getattr(self, name)(*args, **kwargs)]
+
+    def render(self) -> None:
+        """The vector env draws nothing (``render_mode`` None): warns, as Gymnasium's
+        envs do without a render mode, and returns None. Frames come from
+        ``parallel_env(render_mode="rgb_array")`` or ``fov-marl render``."""
+        gymnasium.logger.warn(
+            "a vector env does not render (render_mode is None); use "
+            "parallel_env(render_mode='rgb_array') or `fov-marl render` for frames"
+        )
 
     def close(self) -> None:
         """Nothing to release (no rendering); kept for the vector-env protocol."""

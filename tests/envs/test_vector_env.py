@@ -211,6 +211,36 @@ def test_bad_num_envs(num_envs):
         fov_coverage_v0.vector_env(num_envs=num_envs)
 
 
+@pytest.mark.parametrize("mod", [fov_coverage_v0, fov_crossing_v0])
+def test_too_many_copies_for_memory_is_a_value_error(mod):
+    """Not numpy's bare MemoryError: the message names num_envs."""
+    with pytest.raises(ValueError, match=r"num_envs = 1000000000000 copies of 2 robots"):
+        mod.vector_env(num_envs=10**12, n_agents=2)
+
+
+def test_shard_api_and_render_with_one_process():
+    """get_attr / set_attr / call / shard_starts exist with workers = 1 too (one shard),
+    so code written for SubprocVectorEnv runs unchanged; render() warns and returns None
+    (a vector env has no render mode) instead of an AttributeError."""
+    venv = fov_crossing_v0.vector_env(num_envs=3, n_agents=2, eta_method="exact")
+    venv.reset(seed=0)
+    assert venv.shard_starts == (0, 3)
+    assert venv.get_attr("max_cycles") == [1000]
+    venv.set_attr("max_cycles", 7)
+    assert venv.max_cycles == 7
+    (state,) = venv.call("state")
+    np.testing.assert_array_equal(state, venv.state())
+    for bad in (3, None):
+        with pytest.raises(ValueError, match="name must be a str"):
+            venv.get_attr(bad)
+    with pytest.raises(ValueError, match="max_cycles"):
+        venv.set_attr("max_cycles", 0)
+    with pytest.warns(UserWarning, match="does not render"):
+        assert venv.render() is None
+    with pytest.raises(ValueError, match="eta_method applies to the coverage scenario"):
+        fov_crossing_v0.vector_env(num_envs=1, eta_method="strip")
+
+
 def test_bad_config_names_the_field():
     with pytest.raises(ValueError, match="fov_deg"):
         fov_coverage_v0.vector_env(num_envs=2, fov_deg=-1.0)
