@@ -9,11 +9,12 @@ in the same run, and the ratio; optionally ``vmas``, VMAS simple_spread on CPU w
 ``vector_filter`` (the safety filter and pfcbf over B copies, one pipeline per copy
 against one batched pipeline, :func:`bench_batched_filter`; also at the reduced
 particle budget :data:`FAST_FILTER_PARTICLES`), ``filtered_step`` (env + filter over
-B = 64 copies in 1 and 2 processes, :func:`bench_filtered_step`), ``issue12`` (the acceptance figures of
-the batched core side by side, from the rows of the same run: env ratio at N = 6,
-B = 64; filter ms per robot-step at B N = 384; PPO samples/s when measured),
-``issue10`` (pfcbf's budget, ≤ 1 ms per robot-step at N = 6-48, from the ``controller``
-rows of the paper's 40 m arena after the warm-up) and, with
+B = 64 copies in 1 and 2 processes, :func:`bench_filtered_step`), ``issue12`` (the
+acceptance figures of the batched core side by side, from the rows of the same run: env
+ratio at N = 6, B = 64; filter ms per robot-step at B N = 384; PPO samples/s; a goal
+not run has its row with ``measured`` None), ``issue10`` (pfcbf's budget, ≤ 1 ms per
+robot-step at N = 6-48, from the ``controller`` rows of the paper's 40 m arena after
+the warm-up, always at N = 6 and 48) and, with
 ``ppo=True`` (``fov-marl bench --ppo``), ``ppo`` (:func:`bench_ppo`: PPO samples/s
 with the default hyper-parameters, vector adapter against the per-copy adapter, with
 and without the safety filter). Every number the closing notes quote comes from here.
@@ -40,6 +41,7 @@ __all__ = [
     "bench_controller",
     "issue10_summary",
     "issue12_summary",
+    "ISSUE10_N",
     "run_benchmarks",
     "FAST_FILTER_PARTICLES",
 ]
@@ -662,17 +664,29 @@ def _goal_row(
     return row
 
 
+#: the team sizes of issue 10's budget (<= 1 ms per robot-step at N = 6-48): the ends of
+#: its range, always timed in the paper's 40 m arena by :func:`run_benchmarks`
+ISSUE10_N: tuple[int, ...] = (6, 48)
+#: the sizes of issue 12's figures: the env ratio at N = 6, B = 64 and the filter at
+#: B N = 384 (64 copies of N = 6)
+ISSUE12_N, ISSUE12_B = 6, 64
+ISSUE12_ROBOTS = ISSUE12_N * ISSUE12_B
+
+
 def issue10_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """pfcbf's speed budget (issue 10: ≤ 1 ms per robot-step at N = 6-48) from the
     ``controller`` rows of the paper's 40 m arena (the packed team, after the warm-up),
-    in the row format of :func:`issue12_summary`."""
-    return [
+    in the row format of :func:`issue12_summary`: one row per such controller row with
+    6 ≤ N ≤ 48, and one per N of :data:`ISSUE10_N` without one, with ``measured`` and
+    ``met`` None (not run), so the goal is never silently missing."""
+    out = [
         _goal_row(
             "issue10",
             f"pfcbf ms/robot-step, N={r['n_agents']}, 40 m arena, after {r['warmup_steps']} steps",
             r["ms_per_robot_step"],
             "<= 1 ms",
             r["ms_per_robot_step"] <= 1.0,
+            n_agents=r["n_agents"],
             load_1min=r.get("load_1min"),
         )
         for r in rows
@@ -681,19 +695,49 @@ def issue10_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
         and r.get("safety_model") == "ellipse"
         and 6 <= r["n_agents"] <= 48
     ]
+    seen = {r["n_agents"] for r in out}
+    for n in ISSUE10_N:
+        if n not in seen:
+            out.append(
+                _goal_row(
+                    "issue10",
+                    f"pfcbf ms/robot-step, N={n}, 40 m arena (not run)",
+                    None,
+                    "<= 1 ms",
+                    None,
+                    n_agents=n,
+                )
+            )
+    return sorted(out, key=lambda r: r["n_agents"])
 
 
 def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """The acceptance figures of the batched core (issue 12), side by side, from ``rows``
     of one :func:`run_benchmarks` run: one row per goal with ``measured``, ``goal`` and
-    ``met`` (None when the rows needed were not run)."""
+    ``met``; a goal whose rows were not run still has its row, with ``measured`` and
+    ``met`` None and a figure ending in ``(not run)``.
+
+    The goals: the env-steps/s ratio at N = 6, B = 64 (each η method); the filter's ms
+    per robot-step at B N = 384 (P_T = 2000 and :data:`FAST_FILTER_PARTICLES`); the
+    filtered env step at B N = 384 (each P_T, 1 and 2 workers); PPO samples/s without
+    and with the filter (``fov-marl bench --ppo``). Measured rows beyond those (B N =
+    1536, more B or workers) are listed too.
+    """
     out: list[dict[str, Any]] = []
 
     def add(name: str, measured: float | None, goal: str, met: bool | None, **extra: Any):
         out.append(_goal_row("issue12", name, measured, goal, met, **extra))
 
+    def missing(name: str, goal: str) -> None:
+        if not any(r["figure"] == name for r in out):
+            add(f"{name} (not run)", None, goal, None)
+
     for r in rows:
-        if r["section"] == "vector_env" and r["n_agents"] == 6 and r["num_envs"] == 64:
+        if (
+            r["section"] == "vector_env"
+            and r["n_agents"] == ISSUE12_N
+            and r["num_envs"] == ISSUE12_B
+        ):
             add(
                 f"env-steps/s ratio, N=6 B=64, eta {r['eta_method']}",
                 r["ratio"],
@@ -701,8 +745,14 @@ def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                 r["ratio"] >= 8.0,
                 load_1min=r.get("load_1min"),
             )
+    for method in ("exact", "strip"):
+        missing(f"env-steps/s ratio, N={ISSUE12_N} B={ISSUE12_B}, eta {method}", ">= 8 x one env")
     for r in rows:
-        if r["section"] == "vector_filter" and r["policy"] == "filter" and r["robots"] >= 384:
+        if (
+            r["section"] == "vector_filter"
+            and r["policy"] == "filter"
+            and r["robots"] >= ISSUE12_ROBOTS
+        ):
             add(
                 f"filter ms/robot-step, B*N={r['robots']}, P_T={r.get('n_particles_total')}",
                 r["batched_ms"],
@@ -710,8 +760,10 @@ def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                 r["batched_ms"] <= 0.1,
                 load_1min=r.get("load_1min"),
             )
+    for p_t in (2000, FAST_FILTER_PARTICLES):
+        missing(f"filter ms/robot-step, B*N={ISSUE12_ROBOTS}, P_T={p_t}", "<= 0.1 ms")
     for r in rows:
-        if r["section"] == "filtered_step" and r["robots"] >= 384:
+        if r["section"] == "filtered_step" and r["robots"] >= ISSUE12_ROBOTS:
             # the whole filtered step (env + filter) in wall time, W processes: what a
             # trainer waits for; the CPU time per robot-step is not reduced by W
             add(
@@ -722,8 +774,17 @@ def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                 r["wall_ms_per_robot_step"] <= 0.1,
                 load_1min=r.get("load_1min"),
             )
+    for p_t in (2000, FAST_FILTER_PARTICLES):
+        for w in (1, 2):
+            missing(
+                f"filtered env step wall ms/robot-step, B*N={ISSUE12_ROBOTS}, P_T={p_t}, "
+                f"workers={w}",
+                "<= 0.1 ms (filter alone, one process, in the issue)",
+            )
+    ppo_seen = {False: False, True: False}
     for r in rows:
         if r["section"] == "ppo" and r["adapter"] == "vector":
+            ppo_seen[bool(r["safety_filter"])] = True
             if r["safety_filter"]:
                 today, goal = ISSUE12_PPO_TODAY["filter"], 3000.0
                 name = (
@@ -745,6 +806,16 @@ def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                 vs_issue_today=r["samples_per_s"] / today,
                 load_1min=r.get("load_1min"),
             )
+    if not ppo_seen[False]:
+        today = ISSUE12_PPO_TODAY["no_filter"]
+        add(
+            "PPO samples/s, no filter (not run: fov-marl bench --ppo)",
+            None,
+            f">= 2 x {today:.0f} (issue's today)",
+            None,
+        )
+    if not ppo_seen[True]:
+        add("PPO samples/s, filter (not run: fov-marl bench --ppo)", None, ">= 3000", None)
     return out
 
 
@@ -752,13 +823,21 @@ def run_benchmarks(
     quick: bool = False, n_agents: Sequence[int] | None = None, ppo: bool = False
 ) -> list[dict[str, Any]]:
     """All sections; ``quick`` uses fewer repetitions; ``ppo`` adds :func:`bench_ppo`
-    (about a minute quick, several minutes otherwise) to the ``issue12`` summary."""
+    (about a minute quick, several minutes otherwise) to the ``issue12`` summary.
+
+    ``n_agents`` (default :data:`DEFAULT_N`) are the team sizes of the ``tracker``
+    (default: 6, 12 and 48), ``control`` and ``controller`` sections; the other sections
+    keep their own sizes whatever it is: ``env`` N = 6 and 48, ``vector_env``
+    :data:`VECTOR_CASES`, ``vector_filter`` and ``filtered_step`` N = 6 (B N = 384 for
+    the issue), and the paper-arena ``controller`` rows of ``issue10`` also run at
+    :data:`ISSUE10_N`. ``issue10`` and ``issue12`` have a row for every goal (``measured``
+    None when it was not run, e.g. PPO without ``ppo``).
+    """
     ns = tuple(n_agents) if n_agents else DEFAULT_N
-    rows = bench_env(n_agents=sorted({6, 48, *ns}), steps=100 if quick else 500)
-    # default run: the issue's figures (N = 6 at B = 1/64/256, N = 24 and 100 at B = 64);
-    # with explicit team sizes: those N at B = 64
-    cases = VECTOR_CASES if not n_agents else tuple((n, (64,)) for n in ns)
-    rows.extend(bench_vector_env(cases, quick=quick))
+    rows = bench_env(n_agents=(6, 48), steps=100 if quick else 500)
+    # the issue's figures (N = 6 at B = 1/64/256, N = 24 and 100 at B = 64), whatever
+    # the team sizes of the other sections
+    rows.extend(bench_vector_env(VECTOR_CASES, quick=quick))
     rows.extend(bench_vmas(steps=30 if quick else 100))
     for policy in ("filter", "pfcbf"):
         for r in bench_batched_filter(
@@ -792,7 +871,7 @@ def run_benchmarks(
 
         for r in bench_tracker(
             p_totals=(1000, 2000, 5000),
-            n_agents=sorted({6, 12, 48} & set(ns)) or ns,
+            n_agents=ns if n_agents else (6, 12, 48),
             steps=20 if quick else 100,
             repeats=1 if quick else 3,
         ):
@@ -816,7 +895,7 @@ def run_benchmarks(
         # once the team has packed (bench_controller's docstring)
         rows.extend(
             bench_controller(
-                n_agents=tuple(n for n in ns if n <= 48) or ns,
+                n_agents=tuple(sorted({n for n in ns if n <= 48} | set(ISSUE10_N))),
                 steps=20 if quick else 60,
                 warmup=10 if quick else 100,
                 arena="paper",

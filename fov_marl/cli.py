@@ -39,15 +39,16 @@ from typing import Any
 
 from fov_marl.filter_options import add_filter_arguments, filter_kwargs
 from fov_marl.jsonio import json_text, write_json
-from fov_marl.tables import format_table
+from fov_marl.tables import format_records, format_table
 from fov_marl.validation import MAX_SEED, check_out_dir, check_out_file, check_writable
 
 __all__ = ["main", "build_parser", "format_table", "CliError"]
 
 _PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
 
-#: render keeps its frames in memory (640 x 640 x 3 bytes each): at most this many
-MAX_RENDER_FRAMES = 1000
+#: render keeps its frames in memory (640 x 640 x 3 bytes each): at most this many (the
+#: initial state and the 1000 steps of the default episode at ``--every 1``)
+MAX_RENDER_FRAMES = 1001
 
 
 class _Parser(argparse.ArgumentParser):
@@ -346,7 +347,7 @@ RENDER_SUFFIXES = (".gif", ".mp4", ".png")
 
 def run_render(args: argparse.Namespace) -> Path:
     from fov_marl.config import make_config
-    from fov_marl.video import check_writer, parse_beliefs_of, render_episode
+    from fov_marl.video import check_writer, frame_count, parse_beliefs_of, render_episode
 
     out = check_out_file("--out", args.out, RENDER_SUFFIXES)
     check_writer(out)  # .mp4 needs imageio-ffmpeg: say so before simulating
@@ -357,13 +358,17 @@ def run_render(args: argparse.Namespace) -> Path:
     beliefs = parse_beliefs_of(args.beliefs_of, cfg.n_agents)
     sf_kwargs = _filter_kwargs(args, loaded)
     steps = cfg.max_cycles
-    frames = -(-steps // args.every)
+    frames = frame_count(steps, args.every)  # t = 0, every k-th step, the final state
     if frames > MAX_RENDER_FRAMES:  # render_episode keeps them all, even for a .png
         raise CliError(
             f"--every {args.every}: an episode of {steps} steps keeps {frames} frames in "
-            f"memory (640 x 640 RGB each); at most {MAX_RENDER_FRAMES}: raise --every to "
-            f"{-(-steps // MAX_RENDER_FRAMES)} or lower --max-cycles"
+            f"memory (640 x 640 RGB each: the start, every {args.every}-th step and the "
+            f"end); at most {MAX_RENDER_FRAMES}: raise --every to "
+            f"{-(-steps // (MAX_RENDER_FRAMES - 1))} or lower --max-cycles"
         )
+    # the last check: a trial write (a virtual or read-only file system, /proc, /sys),
+    # so the episode never ends in a write error
+    check_writable("--out", [out])
     path = render_episode(
         scenario=args.scenario,
         policy=args.policy,
@@ -394,9 +399,9 @@ def run_bench(args: argparse.Namespace) -> list[dict[str, Any]]:
     else:
         for section in dict.fromkeys(r["section"] for r in rows):
             sub = [r for r in rows if r["section"] == section]
-            keys = [k for k in sub[0] if k != "section"]
             print(f"\n== {section} ==")
-            print(format_table([[r.get(k) for k in keys] for r in sub], keys))
+            # every key of the section's rows; batched_stage_ms -> batched_stage_ms.qp, ...
+            print(format_records(sub, exclude=("section",)))
     return rows
 
 
@@ -611,13 +616,15 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument(
         "--out",
         default="episode.gif",
-        help="output file: .gif, .mp4 (the [video] extra: imageio-ffmpeg) or .png (the last frame)",
+        help="output file: .gif, .mp4 (the [video] extra: imageio-ffmpeg) or .png (the "
+        "final state)",
     )
     d.add_argument(
         "--every",
         type=_positive_int("--every"),
         default=5,
-        help=f"keep every k-th frame (at most {MAX_RENDER_FRAMES} frames are kept in memory)",
+        help="draw the state every k steps: the frames are t = 0, every k-th step and "
+        f"always the final state (at most {MAX_RENDER_FRAMES} frames are kept in memory)",
     )
     d.add_argument(
         "--fps", type=_positive_int("--fps", 100), default=10, help="frames per second, [1, 100]"
@@ -626,8 +633,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--beliefs-of",
         default="robot_0",
         metavar="robot_k|all|none",
-        help="whose particle filters to draw: one robot, every robot, or none (PF+CBF "
-        "policies and --safety-filter)",
+        help="whose particle filters to draw: one robot (an agent name, robot_0 ... "
+        "robot_{N-1}), every robot, or none (PF+CBF policies and --safety-filter)",
     )
     d.add_argument("--no-legend", action="store_true", help="draw no legend")
     d.set_defaults(func=run_render)
@@ -654,7 +661,8 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"team sizes of the tracker, control and controller sections, each in [2, "
         f"{BENCH_MAX_AGENTS}] (they need a neighbour); the env, vector_env, vector_filter, "
         "filtered_step and issue sections keep their own sizes (N = 6 and 48, the "
-        "issues' figures) (default 6 9 12 24 48)",
+        "issues' figures; issue10's paper-arena controller rows run at N = 6 and 48 too) "
+        "(default 6 9 12 24 48; the tracker 6 12 48)",
     )
     b.set_defaults(func=run_bench)
 
@@ -686,6 +694,14 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _command_parser(parser: argparse.ArgumentParser, command: str | None) -> Any:
+    """The subparser of ``command`` (``fov-marl render``), else ``parser`` itself."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction) and command in action.choices:
+            return action.choices[command]
+    return parser
+
+
 def _raised_by_fov_marl(exc: BaseException) -> bool:
     """True when ``exc`` was raised by fov_marl's own code (its argument checks), not
     inside a third-party library (then it is an unexpected error: show the traceback)."""
@@ -712,7 +728,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run ``fov-marl`` with ``argv``; returns the exit status (argparse's own errors
     and ``--help`` raise ``SystemExit``, status 2 and 0)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # named by the command they were given to, like its other errors
+        _command_parser(parser, args.command).error(f"unrecognized arguments: {' '.join(extra)}")
     debug = bool(getattr(args, "debug", False)) or bool(os.environ.get("FOV_MARL_DEBUG"))
     try:
         rc = args.func(args)

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-__all__ = ["format_table", "format_cell"]
+__all__ = ["format_table", "format_cell", "format_records", "flatten_record"]
 
 
 def format_cell(value: Any) -> str:
@@ -53,3 +53,29 @@ def format_table(
     sep = "  ".join("-" * w for w in widths)
     body = ["  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in cells]
     return "\n".join([line, sep, *body])
+
+
+def flatten_record(row: Mapping[str, Any], sep: str = ".") -> dict[str, Any]:
+    """``row`` with each nested mapping spread into columns ``key.subkey`` (recursively),
+    so a table cell never shows a raw dict:
+
+    >>> flatten_record({"n": 6, "stage_ms": {"qp": 0.1, "lloyd": 0.2}})
+    {'n': 6, 'stage_ms.qp': 0.1, 'stage_ms.lloyd': 0.2}
+    """
+    out: dict[str, Any] = {}
+    for key, value in row.items():
+        if isinstance(value, Mapping):
+            for sub, v in flatten_record(value, sep).items():
+                out[f"{key}{sep}{sub}"] = v
+        else:
+            out[str(key)] = value
+    return out
+
+
+def format_records(rows: Sequence[Mapping[str, Any]], exclude: Sequence[str] = ()) -> str:
+    """:func:`format_table` of dict rows: the columns are every key of every row in the
+    order first seen (``exclude`` left out), nested mappings flattened
+    (:func:`flatten_record`); a key missing from a row is ``-``."""
+    flat = [flatten_record(r) for r in rows]
+    keys = [k for k in dict.fromkeys(k for r in flat for k in r) if k not in exclude]
+    return format_table(flat, keys)

@@ -1,30 +1,79 @@
-"""Render one episode to an animated GIF, an MP4 or a PNG of the last frame.
+"""Render one episode to an animated GIF, an MP4 or a PNG of the final state.
 
 GIF and PNG need only Pillow. MP4 needs the ffmpeg writer of imageio, which the
 ``[video]`` extra installs (``pip install 'fov_marl[video]'``, i.e. imageio-ffmpeg);
 :func:`check_writer` says so before any episode is simulated.
 
-Frames carry a title (policy, scenario, N, β, simulated time) and a legend
-(:func:`fov_marl.envs.rendering.render_frame`); ``beliefs_of`` picks whose particle
-filters are drawn: ``"robot_k"``, ``"all"`` or ``"none"``.
+Frames: the initial state (t = 0), then the state after every ``every``-th step, and
+always the episode's final state, once, as the last frame (:func:`frame_count`); a PNG
+holds that last frame. Frames carry a title (policy, scenario, N, β, simulated time)
+and a legend (:func:`fov_marl.envs.rendering.render_frame`); ``beliefs_of`` picks whose
+particle filters are drawn: ``"robot_k"``, ``"all"`` or ``"none"``.
+
+Every argument of :func:`render_episode` and :func:`save_frames` is checked before any
+simulation: a bad one is a ``ValueError`` naming it and its allowed range (the ranges
+of ``fov-marl render``).
 """
 
 from __future__ import annotations
 
+import os
 import re
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["render_episode", "save_frames", "check_writer", "parse_beliefs_of", "VIDEO_SUFFIXES"]
+from fov_marl.validation import (
+    MAX_SEED,
+    ConfigError,
+    check_bool,
+    check_choice,
+    check_int,
+    check_out_file,
+    check_writable,
+    describe,
+    keyword_parameters,
+)
+
+__all__ = [
+    "render_episode",
+    "save_frames",
+    "check_writer",
+    "parse_beliefs_of",
+    "frame_count",
+    "VIDEO_SUFFIXES",
+    "MAX_FPS",
+]
 
 VIDEO_SUFFIXES = (".gif", ".mp4", ".png")
 VIDEO_EXTRA_HINT = "pip install 'fov_marl[video]'"
+#: the largest frame rate (frames per second) of a GIF/MP4: a GIF stores each frame's
+#: duration in 10 ms units, so 100 fps is its finest
+MAX_FPS = 100
 
 
-def check_writer(out: str | Path) -> None:
+def frame_count(steps: int, every: int) -> int:
+    """How many frames an episode of ``steps`` steps gives (and keeps in memory):
+    ``1 + ceil(steps / every)``, i.e. the initial state (step 0), the state after steps
+    ``every``, ``2 every``, ... and the final state (step ``steps``) once, last. An
+    episode that terminates early (crossing: every robot arrived) gives fewer.
+
+    >>> frame_count(10, 5), frame_count(12, 5), frame_count(1000, 1)
+    (3, 4, 1001)
+    """
+    steps = check_int("steps", steps, 0)
+    every = check_int("every", every, 1)
+    return 1 + -(-steps // every)
+
+
+def check_writer(out: str | os.PathLike, name: str = "--out") -> None:
     """Check that a writer for ``out``'s suffix is available, before any simulation.
+
+    Args:
+        out: the output file.
+        name: how messages name it (the flag, or the Python argument).
 
     Raises:
         ValueError: an unsupported suffix, or ``.mp4`` without imageio-ffmpeg (the
@@ -32,7 +81,7 @@ def check_writer(out: str | Path) -> None:
     """
     suffix = Path(out).suffix.lower()
     if suffix not in VIDEO_SUFFIXES:
-        raise ValueError(f"--out must end in .gif, .mp4 or .png, got {Path(out).name!r}")
+        raise ValueError(f"{name} must end in .gif, .mp4 or .png, got {Path(out).name!r}")
     if suffix == ".mp4":
         try:
             import imageio_ffmpeg
@@ -41,39 +90,90 @@ def check_writer(out: str | Path) -> None:
         except (ImportError, RuntimeError, OSError) as exc:
             reason = " ".join(str(exc).split()) or type(exc).__name__
             raise ValueError(
-                f"--out {out}: writing .mp4 needs imageio-ffmpeg, which the [video] extra "
+                f"{name} {out}: writing .mp4 needs imageio-ffmpeg, which the [video] extra "
                 f"installs ({VIDEO_EXTRA_HINT}), or write a .gif ({reason})"
             ) from None
 
 
-def parse_beliefs_of(value: str, n_agents: int) -> list[int] | str:
-    """``"robot_k"`` -> ``[k]``, ``"all"`` -> ``"all"``, ``"none"`` -> ``[]``.
+def parse_beliefs_of(value: str, n_agents: int, name: str = "--beliefs-of") -> list[int] | str:
+    """An agent name ``"robot_k"`` -> ``[k]``, ``"all"`` -> ``"all"``, ``"none"`` -> ``[]``.
+
+    Only the env's agent names exactly (``robot_0`` ... ``robot_{N-1}``, no leading
+    zeros, no spaces), ``all`` and ``none`` are accepted.
+
+    Args:
+        value: the text.
+        n_agents: N, the team size.
+        name: how messages name the value (the flag, or the Python argument).
 
     Raises:
-        ValueError: another value, or k outside ``[0, n_agents - 1]`` (naming the flag).
+        ValueError: another value (naming ``name`` and listing the accepted forms).
     """
-    text = str(value).strip()
-    if text in ("all", "none"):
-        return "all" if text == "all" else []
-    m = re.fullmatch(r"robot_(\d+)", text)
+    if isinstance(value, str) and value in ("all", "none"):
+        return "all" if value == "all" else []
+    m = re.fullmatch(r"robot_(0|[1-9][0-9]*)", value) if isinstance(value, str) else None
     if m is None or int(m.group(1)) >= n_agents:
-        raise ValueError(
-            f"--beliefs-of must be robot_k with k in [0, {n_agents - 1}], 'all' or 'none', "
-            f"got {value!r}"
-        )
+        names = "robot_0" if n_agents <= 1 else f"robot_0 ... robot_{n_agents - 1}"
+        raise ValueError(f"{name} must be an agent name ({names}), 'all' or 'none', got {value!r}")
     return [int(m.group(1))]
 
 
-def save_frames(frames: list[np.ndarray], out: Path, fps: int = 10) -> Path:
-    """Write ``frames`` (uint8 (H, W, 3)) to ``out`` by its suffix: .gif, .mp4 or .png.
+def _check_beliefs_of(value: Any, n_agents: int) -> list[int] | str:
+    """``beliefs_of`` of :func:`render_episode`: an agent name, ``"all"``, ``"none"`` or
+    a list of robot indices in ``[0, N - 1]`` (no repeats)."""
+    if isinstance(value, str):
+        return parse_beliefs_of(value, n_agents, name="beliefs_of")
+    names = "robot_0" if n_agents <= 1 else f"robot_0 ... robot_{n_agents - 1}"
+    allowed = (
+        f"an agent name ({names}), 'all', 'none' or a list of robot indices in [0, {n_agents - 1}]"
+    )
+    if not isinstance(value, list | tuple):
+        raise ConfigError(f"beliefs_of must be {allowed}, got {describe(value)}")
+    out = [check_int(f"beliefs_of[{k}]", i, 0, n_agents - 1) for k, i in enumerate(value)]
+    if len(set(out)) != len(out):
+        raise ConfigError(f"beliefs_of must not repeat a robot, got {describe(value)}")
+    return out
+
+
+def _check_frames(frames: Any) -> list[np.ndarray]:
+    if not isinstance(frames, Sequence) or isinstance(frames, str | bytes) or not frames:
+        raise ConfigError(
+            f"frames must be a non-empty list of uint8 (H, W, 3) arrays, got {describe(frames)}"
+        )
+    shape = None
+    for k, f in enumerate(frames):
+        if not (isinstance(f, np.ndarray) and f.dtype == np.uint8 and f.ndim == 3):
+            raise ConfigError(f"frames[{k}] must be a uint8 (H, W, 3) array, got {describe(f)}")
+        if f.shape[2] != 3 or 0 in f.shape:
+            raise ConfigError(f"frames[{k}] must be a uint8 (H, W, 3) array, got shape {f.shape}")
+        if shape is None:
+            shape = f.shape
+        elif f.shape != shape:
+            raise ConfigError(
+                f"frames must all have the shape of frames[0], {shape}; frames[{k}] has {f.shape}"
+            )
+    return list(frames)
+
+
+def save_frames(frames: Sequence[np.ndarray], out: str | os.PathLike, fps: int = 10) -> Path:
+    """Write ``frames`` (uint8 (H, W, 3), all one shape) to ``out`` by its suffix: an
+    animated .gif or .mp4 of every frame, or a .png of the last frame.
+
+    Args:
+        frames: the frames, first to last.
+        out: the output file (.gif, .mp4 or .png); its folder is created.
+        fps: frames per second of the GIF/MP4, an integer in [1, 100] (a GIF frame lasts
+            ``1000 // fps`` ms).
 
     Raises:
-        ValueError: unsupported suffix, no frames, or .mp4 without imageio-ffmpeg.
+        ValueError: no frames or not uint8 (H, W, 3) arrays of one shape, ``fps`` out
+            of range, an unsupported suffix, an ``out`` that cannot be written, or .mp4
+            without imageio-ffmpeg; each names the argument.
     """
-    out = Path(out)
-    if not frames:
-        raise ValueError("no frames to save")
-    check_writer(out)
+    frames = _check_frames(frames)
+    fps = check_int("fps", fps, 1, MAX_FPS)
+    out = check_out_file("out", out, VIDEO_SUFFIXES)
+    check_writer(out, "out")
     suffix = out.suffix.lower()
     out.parent.mkdir(parents=True, exist_ok=True)
     if suffix == ".png":
@@ -84,7 +184,7 @@ def save_frames(frames: list[np.ndarray], out: Path, fps: int = 10) -> Path:
         from PIL import Image
 
         imgs = [Image.fromarray(f) for f in frames]
-        imgs[0].save(out, save_all=True, append_images=imgs[1:], duration=int(1000 / fps), loop=0)
+        imgs[0].save(out, save_all=True, append_images=imgs[1:], duration=1000 // fps, loop=0)
     else:  # .mp4, writer checked above
         import imageio.v2 as imageio
 
@@ -92,11 +192,71 @@ def save_frames(frames: list[np.ndarray], out: Path, fps: int = 10) -> Path:
     return out
 
 
+def _check_policy(policy: Any) -> str:
+    """``policy``: a registered policy name, a trained model (``.zip`` or run folder) or
+    an exported set-policy folder."""
+    from fov_marl.baselines import available_policies
+    from fov_marl.evaluation import is_exported_policy, is_model_path
+
+    if isinstance(policy, os.PathLike):
+        policy = os.fspath(policy)
+    names = available_policies()
+    if not isinstance(policy, str) or not (
+        policy in names or is_model_path(policy) or is_exported_policy(policy)
+    ):
+        raise ConfigError(
+            f"policy must be a registered policy {names}, the path of a trained model.zip "
+            f"(or its run folder) or an exported set-policy folder, got {describe(policy)}"
+        )
+    return policy
+
+
+def _check_filter_kwargs(value: Any, on: bool) -> dict[str, Any] | None:
+    """``safety_filter_kwargs``: None or a dict of
+    :class:`~fov_marl.wrappers.SafetyFilterWrapper` keywords (the message lists them),
+    given only with the filter on."""
+    if value is None:
+        return None
+    if not isinstance(value, Mapping):
+        raise ConfigError(f"safety_filter_kwargs must be a dict or None, got {describe(value)}")
+    from fov_marl.wrappers import SafetyFilterWrapper
+
+    valid = keyword_parameters(SafetyFilterWrapper.__init__, skip=2)  # after self and env
+    unknown = sorted(str(k) for k in value if valid is not None and k not in valid)
+    if unknown:
+        raise ConfigError(
+            f"unknown safety_filter_kwargs key(s) {unknown}; valid keys are {sorted(valid or ())}"
+        )
+    if value and not on:  # set, but the filter is off: it would be silently ignored
+        raise ConfigError(
+            f"safety_filter_kwargs needs safety_filter=True, got {dict(value)!r} with the "
+            "filter off"
+        )
+    return dict(value) or None
+
+
+class _DrawAfterReset:
+    """The policy of the episode, drawing the initial state once it is reset (after the
+    env: :func:`fov_marl.evaluation.run_episode` resets the env, then the policy)."""
+
+    def __init__(self, policy: Any, draw: Any) -> None:
+        self._policy = policy
+        self._draw = draw
+
+    def reset(self, *args: Any, **kwargs: Any) -> Any:
+        out = self._policy.reset(*args, **kwargs)
+        self._draw()
+        return out
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._policy, name)
+
+
 def render_episode(
     scenario: str,
-    policy: str,
+    policy: str | os.PathLike,
     seed: int,
-    out: Path,
+    out: str | os.PathLike,
     safety_filter: bool = False,
     every: int = 5,
     fps: int = 10,
@@ -106,7 +266,12 @@ def render_episode(
     safety_filter_kwargs: dict[str, Any] | None = None,
     **env_kwargs: Any,
 ) -> Path:
-    """Run one episode and save every ``every``-th frame to ``out`` (.gif/.mp4/.png).
+    """Run one episode and save its frames to ``out`` (.gif/.mp4/.png).
+
+    The frames are the initial state (t = 0 s), the state after every ``every``-th step
+    and the final state, always, once, as the last frame (:func:`frame_count`): a .png
+    shows the final state. Every argument is checked (a ``ValueError`` naming it and its
+    range) before the episode runs.
 
     Args:
         scenario: ``"coverage"`` or ``"crossing"``.
@@ -115,25 +280,38 @@ def render_episode(
             filter); ``"learned"`` and an exported folder trained behind the filter run
             behind it (:func:`fov_marl.evaluation.learned_filter`; the shipped
             filter's options unless ``safety_filter_kwargs`` gives others).
-        seed: the episode's seed.
-        out: output file; its writer is checked before the episode runs.
+        seed: the episode's seed, an integer in [0, 2**31 - 1].
+        out: output file ending in .gif, .mp4 or .png; its writer is checked and a trial
+            write made before the episode runs (its folder is created).
         safety_filter: run behind :class:`~fov_marl.wrappers.SafetyFilterWrapper`.
-        every: keep every k-th step's frame.
-        fps: frames per second of the GIF/MP4.
-        beliefs_of: whose particle filters to draw (``"robot_k"``, ``"all"``, ``"none"``
-            or a list of indices): the safety filter's trackers when the env is
-            filtered, else the policy's (PF+CBF policies); policies without a
-            pipeline that define ``draw(canvas)`` draw their own layer.
-        legend: draw the legend.
+        every: draw the state every ``every`` steps, an integer >= 1 (1: every step).
+        fps: frames per second of the GIF/MP4, an integer in [1, 100].
+        beliefs_of: whose particle filters to draw (``"robot_k"``, one of the env's
+            agent names, ``"all"``, ``"none"``, or a list of robot indices in
+            [0, N - 1]): the safety filter's trackers when the env is filtered, else the
+            policy's (PF+CBF policies); policies without a pipeline that define
+            ``draw(canvas)`` draw their own layer.
+        legend: draw the legend (a bool).
         safety_filter_kwargs: keywords of the filter
-            (:func:`fov_marl.evaluation.make_env`); None: its defaults, or a trained
-            model's own filter options.
+            (:func:`fov_marl.evaluation.make_env`; unknown keys are an error listing
+            the valid ones, and so are keys with the filter off); None: its defaults,
+            or a trained model's own filter options.
         **env_kwargs: config fields.
     """
+    from fov_marl.envs.base import scenario_config
     from fov_marl.envs.rendering import draw_beliefs, frame_title, render_frame
     from fov_marl.evaluation import is_model_path, run_episode
 
-    check_writer(out)
+    # every check before the episode (and the model load); the trial write last
+    scenario = check_choice("scenario", scenario, ("coverage", "crossing"))
+    policy = _check_policy(policy)
+    seed = check_int("seed", seed, 0, MAX_SEED)
+    safety_filter = check_bool("safety_filter", safety_filter)
+    every = check_int("every", every, 1)
+    fps = check_int("fps", fps, 1, MAX_FPS)
+    legend = check_bool("legend", legend)
+    path = check_out_file("out", out, VIDEO_SUFFIXES)
+    check_writer(path, "out")
     factory_base: Any
     if is_model_path(policy):
         from fov_marl.training import load_policy  # torch only for learned policies
@@ -157,14 +335,32 @@ def render_episode(
             return make_policy("learned" if kw else policy, env, **kw)
 
         label = policy
+    safety_filter_kwargs = _check_filter_kwargs(safety_filter_kwargs, safety_filter)
+    cfg = scenario_config(scenario, "render_episode", env_kwargs)  # the env's own check
+    chosen = _check_beliefs_of(beliefs_of, cfg.n_agents)
+    # a trial write (a virtual or read-only file system, a folder in the way): the
+    # episode never ends in a write error
+    check_writable("out", [path])
     frames: list[np.ndarray] = []
-    state: dict[str, Any] = {"k": 0, "layers": [], "beliefs": False, "chosen": None}
+    state: dict[str, Any] = {"layers": [], "beliefs": False, "drawn": -1}
+
+    def draw(env: Any) -> None:
+        base = env.unwrapped
+        state["drawn"] = base.num_steps
+        frames.append(
+            render_frame(
+                base.config,
+                base.poses,
+                base.targets,
+                state["layers"],
+                title=frame_title(base.config, base.num_steps * base.config.dt_s, label),
+                legend=legend,
+                beliefs=state["beliefs"],
+            )
+        )
 
     def factory(env: Any) -> Any:
         pol = factory_base(env)
-        n = len(env.possible_agents)
-        chosen = parse_beliefs_of(beliefs_of, n) if isinstance(beliefs_of, str) else beliefs_of
-        state["chosen"] = chosen
         owners = [o for o in (env, pol) if getattr(o, "pipeline", None) is not None]
         if owners and chosen:
             pipeline = owners[0].pipeline
@@ -176,27 +372,17 @@ def render_episode(
             state["layers"].append(beliefs_layer)
             state["beliefs"] = True
         elif not owners:
-            draw = getattr(pol, "draw", None)
-            if callable(draw):
-                state["layers"].append(draw)
-        return pol
+            layer = getattr(pol, "draw", None)
+            if callable(layer):
+                state["layers"].append(layer)
+        return _DrawAfterReset(pol, lambda: draw(env))
 
     def on_step(env: Any, infos: dict) -> None:
-        if state["k"] % every == 0:
-            base = env.unwrapped
-            t_s = base.num_steps * base.config.dt_s
-            frames.append(
-                render_frame(
-                    base.config,
-                    base.poses,
-                    base.targets,
-                    state["layers"],
-                    title=frame_title(base.config, t_s, label),
-                    legend=legend,
-                    beliefs=state["beliefs"],
-                )
-            )
-        state["k"] += 1
+        k = env.unwrapped.num_steps
+        # the last step (truncation or termination) is always drawn, once
+        if k % every == 0 or not env.agents:
+            if state["drawn"] != k:
+                draw(env)
 
     factory.__name__ = label
     run_episode(
@@ -208,4 +394,4 @@ def render_episode(
         safety_filter_kwargs=safety_filter_kwargs,
         **env_kwargs,
     )
-    return save_frames(frames, Path(out), fps=fps)
+    return save_frames(frames, path, fps=fps)

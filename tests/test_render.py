@@ -76,6 +76,6 @@ def test_beliefs_of_checks_the_robot():
 
     assert parse_beliefs_of("robot_2", 3) == [2]
     assert parse_beliefs_of("all", 3) == "all" and parse_beliefs_of("none", 3) == []
-    for bad in ("robot_3", "robot", "2", "ALL", ""):
+    for bad in ("robot_3", "robot", "2", "ALL", "", "robot_01", " robot_1", "robot_1\n"):
         with pytest.raises(ValueError, match="--beliefs-of"):
             parse_beliefs_of(bad, 3)
