@@ -47,8 +47,13 @@ def chi2_2dof(confidence: float) -> float:
 
 
 def wrap_angle(a: np.ndarray | float) -> np.ndarray:
-    """Wrap angles (rad) to ``[-π, π)``, elementwise."""
-    return np.mod(np.asarray(a, dtype=np.float64) + np.pi, 2.0 * np.pi) - np.pi
+    """Wrap angles (rad) to ``[-π, π)``, elementwise.
+
+    ``mod(a + π, 2π)`` rounds up to 2π for ``a`` within ~1e-15 below −π (the result
+    would be +π, outside the range); those map to −π.
+    """
+    r = np.mod(np.asarray(a, dtype=np.float64) + np.pi, 2.0 * np.pi) - np.pi
+    return np.where(r >= np.pi, r - 2.0 * np.pi, r)
 
 
 def rotation(yaw_rad: np.ndarray | float) -> np.ndarray:
@@ -111,12 +116,19 @@ def in_fov(p_body: np.ndarray, fov_rad: float, range_m: float) -> np.ndarray:
 
     Args:
         p_body: ``(..., 2)`` points in Σ_i (m).
-        fov_rad: β in (0, 2π].
+        fov_rad: β in (0, 2π] (larger: the whole disk).
         range_m: R_d > 0.
 
     Returns:
         ``(...)`` boolean mask.
+
+    Raises:
+        ValueError: β or R_d not > 0 (or NaN).
     """
+    if not (0.0 < fov_rad and 0.0 < range_m):  # NaN fails too
+        raise ValueError(
+            f"fov_rad must be > 0 and range_m > 0 (rad, m), got {fov_rad!r}, {range_m!r}"
+        )
     p_body = np.asarray(p_body, dtype=np.float64)
     x, y = p_body[..., 0], p_body[..., 1]
     r2 = x * x + y * y
@@ -142,7 +154,10 @@ def confidence_ellipse(
     ``a = sqrt(α λ₁)``, ``b = sqrt(α λ₂)`` with λ₁ ≥ λ₂ the eigenvalues and α the χ²
     quantile; ψ the angle of the major eigenvector from the x axis (Eq. 7), in
     ``(-π/2, π/2]``. Eigenvalues are floored at ``min_var`` so a degenerate
-    covariance (all particles on one point) still gives a valid tiny ellipse.
+    covariance (all particles on one point) still gives a valid tiny ellipse. Where
+    λ₂ < 1e-8 λ₁ it is computed as det / λ₁ (the difference of the closed form cancels),
+    and variances whose squares overflow use ``hypot``: finite, accurate axes from
+    1e-300 to 1e300.
 
     Args:
         cov: ``(..., 2, 2)`` symmetric covariances.
@@ -154,9 +169,21 @@ def confidence_ellipse(
     cov = np.asarray(cov, dtype=np.float64)
     sxx, syy, sxy = cov[..., 0, 0], cov[..., 1, 1], 0.5 * (cov[..., 0, 1] + cov[..., 1, 0])
     mean = 0.5 * (sxx + syy)
-    rad = np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
+    with np.errstate(over="ignore"):
+        rad = np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
+    over = ~np.isfinite(rad) & np.isfinite(sxx) & np.isfinite(syy) & np.isfinite(sxy)
+    if over.any():  # the squares overflow (variances ≳ 1e154): the same root without them
+        rad = np.where(over, np.hypot(0.5 * (sxx - syy), sxy), rad)
+    lam_small = mean - rad
+    # λ₂ ≪ λ₁: mean − rad loses its digits (diag(1e8, 1e-8) gave 22% too long a minor
+    # axis); λ₂ = det / λ₁ there, exact for diagonal covariances. Elsewhere unchanged.
+    few = lam_small < 1e-8 * (mean + rad)
+    if few.any():
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            alt = (sxx * syy - sxy * sxy) / (mean + rad)
+        lam_small = np.where(few & np.isfinite(alt) & (alt >= 0.0), alt, lam_small)
     lam1 = np.maximum(mean + rad, min_var)
-    lam2 = np.maximum(mean - rad, min_var)
+    lam2 = np.maximum(lam_small, min_var)
     psi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
     psi = psi + np.pi * (psi <= -0.5 * np.pi)  # atan2 returns -π for sxy = -0.0
     return np.sqrt(chi2 * lam1), np.sqrt(chi2 * lam2), psi
@@ -202,6 +229,11 @@ def ellipse_distance(
         a, b: ``(...)`` semi-axes (either order; the larger is taken as major).
         psi: ``(...)`` inclination of axis ``a`` from the x axis (rad).
 
+    Degenerate and extreme ellipses (a semi-axis 0: a segment or a point; squares that
+    underflow or overflow, a ≲ 1e-150 or ≳ 1e150 m) are solved again in units of the
+    major semi-axis (a segment: the distance to it; a point: to it), so a finite input
+    never gives NaN; every other input gets the numbers of the iteration above.
+
     Returns:
         ``(...)`` distances ≥ 0 (m), exactly 0 for points inside or on the ellipse.
     """
@@ -212,6 +244,31 @@ def ellipse_distance(
     swap = b > a
     a, b = np.where(swap, b, a), np.where(swap, a, b)
     u, v = np.abs(np.where(swap, v, u)), np.abs(np.where(swap, u, v))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
+        # a degenerate or extreme ellipse gives NaN here: it is solved again below
+        d = _ellipse_distance_folded(u, v, a, b, n_iter)
+    bad = ~np.isfinite(d) & np.isfinite(u) & np.isfinite(v) & np.isfinite(a) & np.isfinite(b)
+    if not bad.any():
+        return d
+    u, v, a, b, d = (np.array(x, dtype=np.float64) for x in np.broadcast_arrays(u, v, a, b, d))
+    u, v, a, b = u[bad], v[bad], a[bad], b[bad]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
+        s = np.where(a > 0.0, a, 1.0)  # the unit: the major semi-axis
+        us, vs, bs = u / s, v / s, b / s
+        seg = np.hypot(np.maximum(us - 1.0, 0.0), vs)  # b = 0: the segment [-a, a]
+        ell = _ellipse_distance_folded(
+            us, vs, np.ones_like(us), np.where(bs > 0.0, bs, 1.0), n_iter
+        )
+        fixed = np.where(a > 0.0, np.where(bs > 0.0, ell, seg) * s, np.hypot(u, v))
+    d[bad] = fixed
+    return d
+
+
+def _ellipse_distance_folded(
+    u: np.ndarray, v: np.ndarray, a: np.ndarray, b: np.ndarray, n_iter: int
+) -> np.ndarray:
+    """:func:`ellipse_distance` of points ``(u, v) ≥ 0`` in the frame of an ellipse with
+    ``a ≥ b`` (the Newton iteration of its docstring)."""
     a2, b2 = a * a, b * b
     inside = (u / a) ** 2 + (v / b) ** 2 <= 1.0
     au, bv = a * u, b * v
@@ -320,7 +377,7 @@ def integrate_unicycle(
     ly = B * v_body[..., 0] + A * v_body[..., 1]
     th = poses_world[..., 2]
     c, s = np.cos(th), np.sin(th)
-    out = np.empty(np.broadcast_shapes(poses_world.shape, v_body.shape[:-1] + (3,)))
+    out = np.empty(np.broadcast_shapes(poses_world.shape[:-1], v_body.shape[:-1], w.shape) + (3,))
     out[..., 0] = poses_world[..., 0] + c * lx - s * ly
     out[..., 1] = poses_world[..., 1] + s * lx + c * ly
     out[..., 2] = wrap_angle(th + phi)

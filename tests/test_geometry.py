@@ -467,3 +467,78 @@ def test_ellipse_distance_early_exit_is_bit_identical(seed, log_ratio):
         ellipse_distance(point, center, a, b, psi),
         _ellipse_distance_all_iterations(point, center, a, b, psi),
     )
+
+
+# ---------------------------------------------------------------- red team 8: edge input
+@pytest.mark.parametrize(
+    ("p", "a", "b", "psi", "expected"),
+    [
+        ([1.0, 1.0], 2.0, 0.0, 0.0, 1.0),  # a segment
+        ([1.0, 0.0], 2.0, 0.0, 0.0, 0.0),  # on the segment
+        ([3.0, 4.0], 0.0, 0.0, 0.3, 5.0),  # a point
+        ([0.0, 0.0], 0.0, 0.0, 0.0, 0.0),  # at the point
+        ([1.0, 0.0], 1e-200, 1e-201, 0.0, 1.0),  # squares underflow
+        ([3e160, 0.0], 1e160, 1e159, 0.0, 2e160),  # squares overflow
+        ([0.0, 3.0], 1e-200, 0.0, 0.0, 3.0),
+    ],
+)
+def test_ellipse_distance_of_degenerate_and_extreme_ellipses(p, a, b, psi, expected):
+    """Finite input never gives NaN (before: NaN for all of these)."""
+    d = ellipse_distance(np.array(p), np.zeros(2), a, b, psi)
+    assert np.isfinite(d) and d == pytest.approx(expected, rel=1e-9, abs=0.0)
+
+
+def test_ellipse_distance_of_a_scaled_ellipse_scales():
+    """The rescue path (units of the major axis) against the ordinary one, and a mixed
+    batch keeps the ordinary entries' numbers."""
+    rng = np.random.default_rng(3)
+    P = rng.normal(size=(50, 2)) * 3.0
+    a, b, psi = rng.uniform(0.5, 3, 50), rng.uniform(0.1, 0.5, 50), rng.uniform(-3, 3, 50)
+    d = ellipse_distance(P, np.zeros(2), a, b, psi)
+    for s in (1e-180, 1e180):
+        np.testing.assert_allclose(
+            ellipse_distance(P * s, np.zeros(2), a * s, b * s, psi), d * s, rtol=1e-9
+        )
+    b_mixed = b.copy()
+    b_mixed[::7] = 0.0
+    mixed = ellipse_distance(P, np.zeros(2), a, b_mixed, psi)
+    ok = b_mixed > 0
+    np.testing.assert_array_equal(mixed[ok], d[ok])
+    assert np.isfinite(mixed).all()
+
+
+@pytest.mark.parametrize(
+    ("cov", "a", "b"),
+    [
+        (np.diag([1e8, 1e-8]), math.sqrt(CHI2_95_2DOF * 1e8), math.sqrt(CHI2_95_2DOF * 1e-8)),
+        (np.diag([1e150, 1.0]), math.sqrt(CHI2_95_2DOF * 1e150), math.sqrt(CHI2_95_2DOF)),
+        (np.diag([1e200, 1.0]), math.sqrt(CHI2_95_2DOF * 1e200), math.sqrt(CHI2_95_2DOF)),
+    ],
+)
+def test_confidence_ellipse_of_very_elongated_covariances(cov, a, b):
+    """Before: the minor axis lost to cancellation (22% too long at diag(1e8, 1e-8), a
+    million times too short at diag(1e150, 1)) and the major one inf at 1e160."""
+    ga, gb, psi = confidence_ellipse(cov)
+    assert ga == pytest.approx(a, rel=1e-12) and gb == pytest.approx(b, rel=1e-9)
+    assert psi == pytest.approx(0.0)
+
+
+def test_wrap_angle_never_returns_plus_pi():
+    x = -math.pi - np.linspace(0.0, 1e-15, 41)
+    w = wrap_angle(x)
+    assert (w < math.pi).all() and (w >= -math.pi).all()
+    yaw = integrate_unicycle(np.array([0.0, 0.0, -math.pi]), np.zeros(2), -3e-15, 1.0)[2]
+    assert -math.pi <= yaw < math.pi
+
+
+def test_integrate_unicycle_broadcasts_omega_and_in_fov_checks_its_sector():
+    out = integrate_unicycle(np.zeros(3), np.array([1.0, 0.0]), np.linspace(0.0, 1.0, 5), 0.1)
+    assert out.shape == (5, 3)
+    for k, w in enumerate(np.linspace(0.0, 1.0, 5)):
+        np.testing.assert_array_equal(
+            out[k], integrate_unicycle(np.zeros(3), np.array([1.0, 0.0]), w, 0.1)
+        )
+    pts = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    for fov, rng in ((math.nan, 5.0), (0.0, 5.0), (-1.0, 5.0), (1.0, -5.0), (1.0, math.nan)):
+        with pytest.raises(ValueError, match="fov_rad must be > 0 and range_m > 0"):
+            in_fov(pts, fov, rng)

@@ -43,7 +43,13 @@ from fov_marl.control.controller import (
     safe_fallback_inputs,
 )
 from fov_marl.control.params import STALL_FRACTION, TRANSLATES_FRACTION, ControllerParams
-from fov_marl.control.safety import SafetyRows, arc_yaw_guard, team_safety_rows
+from fov_marl.control.safety import (
+    SafetyRows,
+    arc_yaw_guard,
+    invalid_rows,
+    safety_triple,
+    team_safety_rows,
+)
 
 __all__ = ["BatchControlResult", "BatchedFovCbfController", "CONTROL_STATUSES"]
 
@@ -174,12 +180,14 @@ class BatchedFovCbfController:
         stats: team totals since construction (same keys as ``FovCbfController.stats``).
     """
 
-    def __init__(self, config: ScenarioConfig, params: ControllerParams | None = None) -> None:
+    def __init__(
+        self, config: ScenarioConfig, params: ControllerParams | dict | None = None
+    ) -> None:
+        # the per-robot controller validates the config and parameters, holds the cone rows
+        self._ref = FovCbfController(config, params)
         self.config = config
-        self.params = params if params is not None else ControllerParams()
+        self.params = self._ref.params
         p = self.params
-        # the per-robot controller validates the parameters and holds the cone rows
-        self._ref = FovCbfController(config, self.params)
         self.h_max = row_h_max(config, p.fov_margin_m)
         # the motion-cone rows exactly as the per-robot controller normalises them
         self._cone_A = self._ref._cone_A
@@ -256,6 +264,7 @@ class BatchedFovCbfController:
         """Normalised collision rows ``(A (R,K,3), b (R,K), kind (R,K), keep (R,K))``."""
         p, cfg = self.params, self.config
         R, M = p_body.shape[:2]
+        self._bad_safety = np.zeros(R, dtype=bool)
         if p.safety_model != "ellipse" or (safety is None and M == 0):
             return np.zeros((R, 0, 3)), np.zeros((R, 0)), np.zeros((R, 0), np.int8), None
         if safety is None:
@@ -271,7 +280,7 @@ class BatchedFovCbfController:
         if isinstance(safety, SafetyRows):
             A, b, kind = safety.A, safety.b, safety.kind
         else:
-            A, b, kind = (np.asarray(x) for x in safety)
+            A, b, kind = safety_triple(safety)
         A = np.asarray(A, dtype=np.float64)
         b = np.asarray(b, dtype=np.float64)
         kind = np.asarray(kind)
@@ -282,6 +291,9 @@ class BatchedFovCbfController:
             )
         if kind.shape != b.shape:
             raise ValueError(f"safety kind must have shape {b.shape}, got {kind.shape}")
+        # a row with non-finite coefficients, b NaN or b = -inf is invalid input: the
+        # robot gets the invalid-input fallback (b = +inf is a row that never binds)
+        self._bad_safety = ((kind >= 0) & invalid_rows(A, b)).any(axis=1)
         At, bt, _ = normalise_rows(A, b, cfg.v_max_mps, cfg.omega_max_radps, p.row_clip)
         keep = (kind >= 0) & (bt < 1.0 if p.prune else np.isfinite(b))
         return At, bt, kind, keep
@@ -541,7 +553,7 @@ class BatchedFovCbfController:
         intervened[unc] = False
         safety_v = np.maximum(kappa[..., SAFETY_ROW].max(axis=1, initial=0.0), safety_kappa)
         # invalid inputs
-        bad = ~finite
+        bad = ~finite | self._bad_safety
         if bad.any():
             res_u[bad] = 0.0
             status[bad] = _INV

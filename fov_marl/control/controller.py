@@ -77,6 +77,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -91,7 +92,15 @@ from fov_marl.control.cbf import (
 from fov_marl.control.coverage import check_lloyd_stencil
 from fov_marl.control.params import STALL_FRACTION, TRANSLATES_FRACTION, ControllerParams
 from fov_marl.control.qp import HierarchicalQP
-from fov_marl.control.safety import ROW_CONE, ROW_WALL, arc_yaw_guard, team_safety_rows
+from fov_marl.control.safety import (
+    ROW_CONE,
+    ROW_WALL,
+    arc_yaw_guard,
+    invalid_rows,
+    safety_triple,
+    team_safety_rows,
+)
+from fov_marl.validation import check_params, describe
 
 __all__ = [
     "ControlResult",
@@ -297,9 +306,16 @@ class FovCbfController:
         qp: the robot's :class:`~fov_marl.control.qp.HierarchicalQP`.
     """
 
-    def __init__(self, config: ScenarioConfig, params: ControllerParams | None = None) -> None:
+    def __init__(
+        self, config: ScenarioConfig, params: ControllerParams | dict | None = None
+    ) -> None:
+        if not isinstance(config, ScenarioConfig):
+            raise ValueError(
+                f"config must be a ScenarioConfig (fov_marl.config.make_config), got "
+                f"{describe(config)}"
+            )
         self.config = config
-        self.params = params if params is not None else ControllerParams()
+        self.params = check_params("params", params, ControllerParams)
         if config.scenario == "coverage":
             check_lloyd_stencil(config, self.params)  # fail at construction, not mid-episode
         self.h_max = row_h_max(config, self.params.fov_margin_m)
@@ -441,18 +457,27 @@ class FovCbfController:
                 blind=False,
             )
             safety = rows.robot(0)
-        A, b, kind = (np.asarray(x) for x in safety)
-        A = A.astype(np.float64).reshape(-1, 3)
-        b = b.astype(np.float64).reshape(-1)
-        kind = kind.reshape(-1)
-        if A.shape[0] != b.shape[0] or kind.shape[0] != b.shape[0]:
-            raise ValueError(
-                f"safety rows must be A (K, 3), b (K,), kind (K,); got {A.shape}, {b.shape}, "
-                f"{kind.shape}"
-            )
+        A, b, kind = self._parse_safety(safety)
         At, bt, _ = normalise_rows(A, b, cfg.v_max_mps, cfg.omega_max_radps, p.row_clip)
         keep = bt < 1.0 if p.prune else np.isfinite(b)
         return At[keep], bt[keep], kind[keep]
+
+    @staticmethod
+    def _parse_safety(safety: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``safety`` as ``(A (K, 3) float, b (K,) float, kind (K,))``, else ``ValueError``."""
+        A, b, kind = safety_triple(safety)
+        try:
+            A = A.astype(np.float64).reshape(-1, 3)
+            b = b.astype(np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            A = b = np.zeros(0)  # reported below with the shapes given
+        kind = kind.reshape(-1)
+        if A.ndim != 2 or A.shape[0] != b.shape[0] or kind.shape[0] != b.shape[0]:
+            raise ValueError(
+                f"safety rows must be A (K, 3), b (K,), kind (K,) real arrays; got "
+                f"{np.shape(safety[0])}, {np.shape(safety[1])}, {np.shape(safety[2])}"
+            )
+        return A, b, kind
 
     def _project(self, u: np.ndarray) -> np.ndarray:
         """Projection onto the admissible set (polygon × ω box; separable, so the ω weight
@@ -709,9 +734,19 @@ class FovCbfController:
             ids = np.asarray(ids)
             if ids.shape != (M,):
                 raise ValueError(f"ids must have shape ({M},), got {ids.shape}")
+        for name, value in (
+            ("detected", detected),
+            ("fov_yield", fov_yield),
+            ("priority_bonus", priority_bonus),
+        ):
+            if value is not None and np.shape(value) != (M,):
+                raise ValueError(f"{name} must have shape ({M},) or be None, got {np.shape(value)}")
+        # a collision row with non-finite coefficients, b NaN or b = -inf is invalid
+        # input (b = +inf: a row that never binds); before, such rows were dropped
+        bad_rows = safety is not None and bool(invalid_rows(*self._parse_safety(safety)[:2]).any())
         self.stats["steps"] += 1
         kappa = np.zeros((M, 4))
-        if not (
+        if bad_rows or not (
             np.isfinite(u_star).all()
             and np.isfinite(p_body).all()
             and np.isfinite(v_est_body).all()

@@ -118,6 +118,8 @@ import osqp
 import scipy.sparse as sp
 from scipy.optimize import nnls
 
+from fov_marl.validation import check_int, check_real
+
 __all__ = [
     "QPResult",
     "HierarchicalQP",
@@ -150,12 +152,26 @@ def project_to_admissible(u: np.ndarray, v_max: float, omega_max: float, n: int)
     vertex region).
 
     Args:
-        u: ``(3,)`` ``[vx, vy, ω]``.
+        u: ``(3,)`` finite ``[vx, vy, ω]``.
+        v_max, omega_max: the bounds, > 0 (m/s, rad/s); n: the polygon's sides, ≥ 3.
 
     Returns:
         ``(3,)`` projected input.
+
+    Raises:
+        ValueError: a non-finite ``u`` or bounds out of range.
     """
     out = np.array(u, dtype=np.float64)
+    if out.shape != (3,) or not (
+        math.isfinite(out[0]) and math.isfinite(out[1]) and math.isfinite(out[2])
+    ):
+        raise ValueError(f"u must be a finite (3,) [vx, vy, omega], got {out.tolist()!r}")
+    if not (0.0 < v_max < math.inf and 0.0 < omega_max < math.inf):
+        raise ValueError(
+            f"v_max and omega_max must be finite and > 0, got {v_max!r}, {omega_max!r}"
+        )
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 3:
+        raise ValueError(f"n must be an integer >= 3 (polygon sides), got {n!r}")
     apothem = v_max * math.cos(math.pi / n)
     vx, vy = out[0], out[1]
     k = round(math.atan2(vy, vx) * n / (2.0 * math.pi))
@@ -359,10 +375,13 @@ class HierarchicalQP:
         max_iter: int = 4000,
         reg: float = 1e-3,
     ) -> None:
-        if not (v_max > 0 and omega_max > 0):
-            raise ValueError(f"v_max and omega_max must be > 0, got {v_max}, {omega_max}")
-        if n_polygon < 4:
-            raise ValueError(f"n_polygon must be >= 4, got {n_polygon}")
+        check_real("v_max", v_max, 0.0, math.inf, lo_open=True, hi_open=True)
+        check_real("omega_max", omega_max, 0.0, math.inf, lo_open=True, hi_open=True)
+        check_int("n_polygon", n_polygon, 4)
+        check_real("reg", reg, 0.0, math.inf, lo_open=True, hi_open=True)
+        check_real("eps", eps, 0.0, math.inf, lo_open=True, hi_open=True)
+        check_int("max_iter", max_iter, 1)
+        check_int("capacity", capacity, 1)
         if backend not in _BACKENDS:
             raise ValueError(f"backend must be one of {_BACKENDS}, got {backend!r}")
         self.v_max = float(v_max)
@@ -433,7 +452,14 @@ class HierarchicalQP:
         """
         A = np.asarray(A, dtype=np.float64).reshape(-1, 3)
         b = np.asarray(b, dtype=np.float64).reshape(-1)
-        level = np.asarray(level).reshape(-1).astype(np.int64)
+        lv = np.asarray(level).reshape(-1)
+        if (
+            lv.dtype == bool
+            or lv.dtype.kind not in "iuf"
+            or (lv.dtype.kind == "f" and not (np.isfinite(lv) & (lv == np.round(lv))).all())
+        ):
+            raise ValueError(f"level must hold integer priorities, got {lv.tolist()!r}")
+        level = lv.astype(np.int64)
         u_star = np.asarray(u_star, dtype=np.float64).reshape(-1)
         R = b.shape[0]
         if A.shape[0] != R or level.shape[0] != R or u_star.shape != (3,):

@@ -350,6 +350,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.special import ndtri
@@ -357,6 +358,7 @@ from scipy.special import ndtri
 from fov_marl.config import ScenarioConfig
 from fov_marl.control.params import ControllerParams
 from fov_marl.geometry import body_to_world, integrate_unicycle
+from fov_marl.validation import describe
 
 __all__ = [
     "ROW_NEIGHBOUR",
@@ -386,6 +388,8 @@ __all__ = [
     "neighbour_row_offsets",
     "safety_rows",
     "team_safety_rows",
+    "safety_triple",
+    "invalid_rows",
 ]
 
 #: masses within this of ``risk`` count as not exceeding it (the group sums are
@@ -393,6 +397,34 @@ __all__ = [
 _MASS_TOL = 1e-9
 #: ``SafetyRows.kind`` codes.
 ROW_NEIGHBOUR, ROW_BLIND, ROW_WALL, ROW_CONE = 0, 1, 2, 3
+
+
+def safety_triple(safety: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ``safety=`` argument of the controllers, ``(A, b, kind)``, as three real
+    arrays (shapes are checked by the caller); anything else is a ``ValueError``."""
+    if isinstance(safety, SafetyRows):
+        return safety.A, safety.b, safety.kind
+    if not isinstance(safety, tuple | list) or len(safety) != 3:
+        raise ValueError(
+            f"safety must be a SafetyRows or a tuple (A, b, kind), got {describe(safety)}"
+        )
+    out = []
+    for name, x in zip(("A", "b", "kind"), safety, strict=True):
+        a = np.asarray(x)
+        if a.dtype == object or a.dtype.kind not in "biuf":
+            raise ValueError(f"safety {name} must be a real array, got {describe(x)}")
+        out.append(a)
+    return out[0], out[1], out[2]
+
+
+def invalid_rows(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(..., K)`` bool: rows ``A u + b ≥ 0`` that are not valid input, i.e. with a
+    non-finite coefficient, ``b`` NaN or ``b = −∞`` (``b = +∞`` is a row that never
+    binds, valid). The controllers give such a robot the invalid-input fallback (u = 0)
+    instead of dropping the row."""
+    A = np.asarray(A, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    return ~np.isfinite(A).all(axis=-1) | np.isnan(b) | (b == -np.inf)
 
 
 def barrier_gain(gain_per_s: float, dt_s: float) -> float:

@@ -590,3 +590,60 @@ def test_keep_right_has_hysteresis():
     r = c.solve(u, p, v, d, safety=loose, unblock_latched=True)
     assert not r.unblocked
     np.testing.assert_allclose(r.u, [0.3, 0.0, 0.0], atol=1e-6)
+
+
+# ---------------------------------------------------------------- red team 8: bad input
+def _one_neighbour_ahead():
+    cfg = make_config(scenario="coverage", n_agents=2)
+    p = np.array([[1.5, 0.0]])
+    return cfg, p, np.zeros((1, 2)), np.array([1.0])
+
+
+@pytest.mark.parametrize("b_bad", [np.nan, -np.inf])
+def test_a_non_finite_collision_row_is_invalid_input_not_dropped(b_bad):
+    """A NaN (or −inf) collision row given through ``safety=`` used to be dropped: the
+    robot drove at full speed at the neighbour it guarded ("unconstrained"). It is now
+    the invalid-input fallback (u = 0), in both controllers; b = +inf stays a row that
+    never binds."""
+    from fov_marl.control.batched import BatchedFovCbfController
+
+    cfg, p, v, d = _one_neighbour_ahead()
+    u_star = np.array([1.0, 0.0, 0.0])
+    A, kind = np.array([[-1.0, 0.0, 0.0]]), np.zeros(1, dtype=np.int8)
+    ctl = FovCbfController(cfg)
+    held = ctl.solve(u_star, p, v, d, safety=(A, np.array([0.0]), kind))
+    assert held.status == "solved" and held.u[0] <= 1e-9
+    bad = ctl.solve(u_star, p, v, d, safety=(A, np.array([b_bad]), kind))
+    assert bad.status == "invalid_input" and bad.fallback
+    np.testing.assert_array_equal(bad.u, 0.0)
+    nan_a = ctl.solve(u_star, p, v, d, safety=(A * np.nan, np.array([0.0]), kind))
+    assert nan_a.status == "invalid_input"
+    free = ctl.solve(u_star, p, v, d, safety=(A, np.array([np.inf]), kind))
+    assert free.status == "unconstrained"
+    # the batched controller: only the robot with the bad row falls back
+    bat = BatchedFovCbfController(cfg)
+    b2 = np.array([[0.0], [b_bad]])
+    res = bat.solve(
+        np.tile(u_star, (2, 1)), np.tile(p, (2, 1, 1)), np.zeros((2, 1, 2)), np.ones((2, 1)),
+        safety=(np.tile(A, (2, 1, 1)), b2, np.zeros((2, 1), dtype=np.int8)),
+    )  # fmt: skip
+    assert list(res.status_names) == ["solved", "invalid_input"]
+    np.testing.assert_array_equal(res.u[1], 0.0)
+
+
+def test_controller_arguments_are_checked():
+    cfg, p, v, d = _one_neighbour_ahead()
+    with pytest.raises(ValueError, match="config must be a ScenarioConfig"):
+        FovCbfController(None)
+    assert FovCbfController(cfg, {"omega_weight": 2.0}).params.omega_weight == 2.0
+    with pytest.raises(ValueError, match="params fields"):
+        FovCbfController(cfg, {"no_such_field": 1})
+    ctl = FovCbfController(cfg)
+    u = np.array([1.0, 0.0, 0.0])
+    for name in ("detected", "fov_yield", "priority_bonus"):
+        with pytest.raises(ValueError, match=rf"{name} must have shape \(1,\)"):
+            ctl.solve(u, p, v, d, **{name: [True, False]})
+    with pytest.raises(ValueError, match="safety must be a SafetyRows or a tuple"):
+        ctl.solve(u, p, v, d, safety=(np.zeros((1, 3)), np.zeros(1)))
+    with pytest.raises(ValueError, match="safety A must be a real array"):
+        ctl.solve(u, p, v, d, safety=(None, None, None))

@@ -403,3 +403,35 @@ def test_duplicate_rows_screen_matches_the_dense_comparison(seed, R, n_copies):
         perm = rng.permutation(b.size)
         A, b = A[perm], b[perm]
     assert np.array_equal(duplicate_rows(A, b), _duplicate_rows_dense(A, b))
+
+
+def test_projection_and_hierarchy_arguments_are_checked():
+    """Before: NaN gave an unrelated message, inf a NaN output, n = 0 a
+    ZeroDivisionError, v_max < 0 a projection the wrong way, n_polygon = 4.5 was
+    truncated, reg < 0 a math domain error and level NaN a hard row."""
+    from fov_marl.control.qp import HierarchicalQP
+
+    for u in ([np.nan, 0.0, 0.0], [np.inf, np.inf, 0.0]):
+        with pytest.raises(ValueError, match="u must be a finite"):
+            project_to_admissible(np.array(u), 1.0, 1.0, 16)
+    with pytest.raises(ValueError, match="n must be an integer >= 3"):
+        project_to_admissible(np.array([1.0, 0.0, 0.0]), 1.0, 1.0, 0)
+    with pytest.raises(ValueError, match="v_max and omega_max"):
+        project_to_admissible(np.array([1.0, 0.0, 0.0]), -1.0, 1.0, 16)
+    for kw, name in (
+        ({"n_polygon": 4.5}, "n_polygon"),
+        ({"n_polygon": "8"}, "n_polygon"),
+        ({"reg": -1.0}, "reg"),
+        ({"eps": 0.0}, "eps"),
+        ({"max_iter": 0}, "max_iter"),
+    ):
+        with pytest.raises(ValueError, match=name):
+            HierarchicalQP(1.0, 1.0, **kw)
+    with pytest.raises(ValueError, match="v_max"):
+        HierarchicalQP(math.nan, 1.0)
+    qp = HierarchicalQP(1.0, 1.0)
+    A, b = np.array([[1.0, 0.0, 0.0]]), np.array([-0.5])
+    for level in ([np.nan], [0.5], ["a"]):
+        with pytest.raises(ValueError, match="level must hold integer priorities"):
+            qp.solve(A, b, np.array(level), np.zeros(3))
+    assert qp.solve(A, b, np.array([1.0]), np.zeros(3)).u[0] == pytest.approx(0.5)
