@@ -621,7 +621,7 @@ def particle_halfplane_offsets(
 
     Args:
         p_body: ``(R, P, 2)`` particles in Σ_i (m), each row sorted by owner in
-            neighbour-column order (:meth:`TrackerBank.particles_all`).
+            neighbour-column order (:meth:`VectorTrackerBank.particles_all`).
         counts: ``(R, M)`` particles per neighbour column; rows sum to P.
         n_body: ``(R, M, 2)`` unit lines of sight.
         risk: δ in (0, 0.5).

@@ -100,6 +100,7 @@ from fov_marl.estimation import kernels as K
 from fov_marl.estimation.params import TrackerParams
 from fov_marl.geometry import chi2_2dof, confidence_ellipse, ellipse_distance, world_to_body
 from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, ObservationLayout, action_to_velocity
+from fov_marl.validation import ConfigError, check_int, check_seed, describe, holds_bool
 
 __all__ = ["TrackerEstimate", "BankEstimate", "TrackerBank", "NeighborTracker", "VectorTrackerBank"]
 
@@ -119,7 +120,8 @@ class TrackerEstimate:
         ellipse_psi: ``(M,)`` inclination of the major axis from the body x axis (rad).
         ellipse_distance: ``(M,)`` exact distance from robot i (origin of Σ_i) to the
             filled ellipse, 0 inside (m).
-        counts: ``(M,)`` particles now held per neighbour; sums to P_T.
+        counts: ``(M,)`` particles now held per neighbour; sums to P_T (N = 1: no
+            neighbour, no particles, an empty array).
         detected: ``(M,)`` bool, detected in the last observation.
         time_since_seen_s: ``(M,)`` seconds since the last detection (since the reset
             when never detected).
@@ -186,7 +188,12 @@ class BankEstimate:
     time_s: float
 
     def robot(self, k: int) -> TrackerEstimate:
-        """The :class:`TrackerEstimate` of the bank's ``k``-th robot (row k)."""
+        """The :class:`TrackerEstimate` of the bank's ``k``-th robot (row k).
+
+        Raises:
+            ValueError: ``k`` not an integer in ``[0, R − 1]`` (no negative indexing).
+        """
+        k = check_int("k", k, 0, int(self.agent_indices.shape[0]) - 1, note="(a robot row)")
         kw = {}
         for f in fields(TrackerEstimate):
             v = getattr(self, f.name)
@@ -210,6 +217,34 @@ def _resolve_agent(env: Any, agent: str | int) -> int:
     if agent not in agents:
         raise ValueError(f"agent must be one of {agents}, got {agent!r}")
     return agents.index(agent)
+
+
+def _real_data(name: str, value: Any, shape_text: str) -> np.ndarray:
+    """``np.asarray(value)`` when it holds integer or floating data, else a ``ValueError``
+    naming ``name`` and the expected shape (str, bytes, bool, complex, object data and
+    what NumPy cannot convert; nothing is coerced). The shape is left to the caller."""
+    raw = None
+    if not isinstance(value, str | bytes | bytearray):
+        try:
+            raw = np.asarray(value)
+        except Exception:  # ragged lists, objects whose __array__ fails
+            raw = None
+    if raw is None or raw.dtype.kind not in "iuf" or holds_bool(value):
+        raise ConfigError(
+            f"{name} must be a {shape_text} array of real numbers, got {describe(value)}"
+        )
+    return raw
+
+
+def _items(name: str, value: Any, what: str) -> list[Any]:
+    """``list(value)`` for a sequence (not a str), else a ``ValueError`` naming ``name``
+    and ``what`` it must hold."""
+    if not isinstance(value, str | bytes | bytearray):
+        try:
+            return list(value)
+        except TypeError:  # not iterable (an int, a Generator, a 0-d array)
+            pass
+    raise ConfigError(f"{name} must be a sequence of {what}, got {describe(value)}")
 
 
 def _env_config(env: Any) -> ScenarioConfig:
@@ -247,7 +282,8 @@ class _BankCore:
             np.zeros(self._R, dtype=np.int64) if copy_index is None else np.asarray(copy_index)
         )
         self._M = m
-        self._P = int(params.n_particles_total)
+        # particles held per row: P_T, or none without a neighbour (N = 1)
+        self._P = int(params.n_particles_total) if m else 0
         lays = [ObservationLayout(n, int(a)) for a in agent_indices]
         self._ids = np.stack([lay.neighbour_ids for lay in lays]).reshape(self._R, m)
         model = params.motion_model
@@ -349,6 +385,10 @@ class _BankCore:
                 self._mode = K.stratified_modes(
                     local, self._block_len[self._gid], self._cdf
                 ).reshape(R, P)
+        elif self._mix:  # no neighbour (N = 1): empty per-particle states (P = 0)
+            self._vx = np.empty((R, 0))
+            self._vy = np.empty((R, 0))
+            self._mode = np.empty((R, 0), dtype=np.int8)
         self._tss = np.zeros((R, M))
         self._time = np.zeros(R)
         self.n_recoveries_detection[:] = 0
@@ -924,13 +964,14 @@ class TrackerBank:
     Args:
         config: the scenario.
         params: tracker parameters (default :class:`TrackerParams()`).
-        agent_indices: team indices of the robots in the bank (default: all N, in order).
+        agent_indices: team indices of the robots in the bank (default: all N, in order),
+            distinct integers in ``[0, N − 1]``.
         rngs: one ``np.random.Generator`` per robot of the bank. Default: spawned from
             ``np.random.SeedSequence(seed)``, child ``k`` for row ``k``.
-        seed: used only when ``rngs`` is None.
+        seed: ``None`` or an integer ≥ 0; used only when ``rngs`` is None (checked always).
 
     Raises:
-        ValueError: bad ``config``, ``params``, ``agent_indices``, ``rngs``, or
+        ValueError: bad ``config``, ``params``, ``agent_indices``, ``rngs``, ``seed``, or
             ``n_particles_total < N − 1``.
     """
 
@@ -949,18 +990,22 @@ class TrackerBank:
         if not isinstance(params, TrackerParams):
             raise ValueError(f"params must be a TrackerParams, got {type(params).__name__}")
         n = config.n_agents
+        seed = check_seed("seed", seed)
         if agent_indices is None:
             agent_indices = range(n)
-        idx = np.asarray(list(agent_indices))
-        if idx.ndim != 1 or idx.size == 0 or not np.issubdtype(idx.dtype, np.integer):
-            raise ValueError(f"agent_indices must be a non-empty sequence of ints, got {idx!r}")
-        if np.any((idx < 0) | (idx >= n)) or np.unique(idx).size != idx.size:
-            raise ValueError(
-                f"agent_indices must be distinct robot indices in [0, {n - 1}], got {idx.tolist()}"
-            )
+        what = f"distinct robot indices (integers in [0, {n - 1}])"
+        items = _items("agent_indices", agent_indices, what)
+        if not items:
+            raise ConfigError(f"agent_indices must be a non-empty sequence of {what}, got []")
+        idx = np.array(
+            [check_int(f"agent_indices[{k}]", a, 0, n - 1) for k, a in enumerate(items)],
+            dtype=np.int64,
+        )
+        if np.unique(idx).size != idx.size:
+            raise ConfigError(f"agent_indices must be {what}, got {idx.tolist()}")
         if rngs is None:
             rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(idx.size)]
-        rngs = list(rngs)
+        rngs = _items("rngs", rngs, f"{idx.size} np.random.Generator objects (one per robot)")
         if len(rngs) != idx.size or not all(isinstance(g, np.random.Generator) for g in rngs):
             raise ValueError(
                 f"rngs must be {idx.size} np.random.Generator objects (one per robot), "
@@ -997,7 +1042,8 @@ class TrackerBank:
     ) -> TrackerBank:
         """Bank for the robots ``agents`` (default all) of a PettingZoo env with ``.config``.
 
-        Robot k's Generator is ``default_rng(SeedSequence(seed).spawn(R)[k])``.
+        Robot k's Generator is ``default_rng(SeedSequence(seed).spawn(R)[k])`` (``seed``:
+        None or an integer ≥ 0).
         ``param_overrides`` are fields of :class:`TrackerParams`.
         """
         cfg = _env_config(env)
@@ -1056,7 +1102,7 @@ class TrackerBank:
                 key = f"robot_{a}"
                 if key not in obs:
                     raise ValueError(f"{name} must hold an observation for {key!r}")
-                rows.append(np.asarray(obs[key]))
+                rows.append(_real_data(f"{name}[{key!r}]", obs[key], f"({self._obs_size},)"))
             try:
                 arr = np.stack(rows).astype(np.float64)
             except ValueError:
@@ -1064,10 +1110,8 @@ class TrackerBank:
                     f"{name}: every observation must have shape ({self._obs_size},)"
                 ) from None
         else:
-            try:
-                arr = np.asarray(obs, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ValueError(f"{name} must be a numeric array, got {obs!r}") from None
+            _real_data(name, obs, f"(n_robots, obs_size) = ({self._R}, {self._obs_size})")
+            arr = np.asarray(obs, dtype=np.float64)
         if arr.shape != (self._R, self._obs_size):
             raise ValueError(
                 f"{name} must have shape (n_robots, obs_size) = ({self._R}, {self._obs_size}), "
@@ -1084,16 +1128,15 @@ class TrackerBank:
                 key = f"robot_{a}"
                 if key not in actions:
                     raise ValueError(f"{name} must hold an action for {key!r}")
+                _real_data(f"{name}[{key!r}]", actions[key], "(3,)")
                 rows.append(np.asarray(actions[key], dtype=np.float64).reshape(-1))
             try:
                 arr = np.stack(rows)
             except ValueError:
                 raise ValueError(f"{name}: every action must have shape (3,)") from None
         else:
-            try:
-                arr = np.asarray(actions, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ValueError(f"{name} must be a numeric array, got {actions!r}") from None
+            _real_data(name, actions, f"(n_robots, 3) = ({self._R}, 3)")
+            arr = np.asarray(actions, dtype=np.float64)
         if arr.shape != (self._R, 3):
             raise ValueError(
                 f"{name} must have shape (n_robots, 3) = ({self._R}, 3), got {arr.shape}"
@@ -1125,8 +1168,9 @@ class TrackerBank:
         if known:
             if initial_poses_world is None:
                 raise ValueError("initial_poses_world is required when init_mode='known'")
-            init = np.asarray(initial_poses_world, dtype=np.float64)
             n = self.config.n_agents
+            _real_data("initial_poses_world", initial_poses_world, f"(n_agents, 3) = ({n}, 3)")
+            init = np.asarray(initial_poses_world, dtype=np.float64)
             if init.shape != (n, 3):
                 raise ValueError(
                     f"initial_poses_world must have shape (n_agents, 3) = ({n}, 3), "
@@ -1192,7 +1236,8 @@ class TrackerBank:
 
         Returns:
             ``(p_body (P_T, 2) m in Σ_i, owner (P_T,) int neighbour ID)``, flat, sorted by
-            owner; copies.
+            owner; copies. With no neighbour (N = 1) there are no particles: ``(0, 2)``
+            and ``(0,)`` (likewise for the other ``particle_*`` accessors).
         """
         core, j = self._locate(k)
         return core.particles_body(j)
@@ -1263,8 +1308,9 @@ class NeighborTracker:
         cls, env: Any, agent: str | int = "robot_0", seed: int | None = 0, **param_overrides: Any
     ) -> NeighborTracker:
         """Tracker of ``agent`` for a PettingZoo env exposing ``.config`` and
-        ``.possible_agents``; ``rng = default_rng(seed)``; ``param_overrides`` are
-        :class:`TrackerParams` fields."""
+        ``.possible_agents``; ``rng = default_rng(seed)`` (``seed``: None or an integer
+        ≥ 0); ``param_overrides`` are :class:`TrackerParams` fields."""
+        seed = check_seed("seed", seed)
         cfg = _env_config(env)
         idx = _resolve_agent(env, agent)
         return cls(cfg, idx, _params(param_overrides), np.random.default_rng(seed))
@@ -1307,10 +1353,8 @@ class NeighborTracker:
         return self._bank.initialised
 
     def _obs(self, obs: Any) -> np.ndarray:
-        try:
-            arr = np.asarray(obs, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"obs must be a numeric array, got {obs!r}") from None
+        _real_data("obs", obs, f"({self._obs_size},)")
+        arr = np.asarray(obs, dtype=np.float64)
         if arr.shape != (self._obs_size,):
             raise ValueError(
                 f"obs of robot_{self.agent_index} must have shape ({self._obs_size},), "
@@ -1326,10 +1370,8 @@ class NeighborTracker:
     def step(self, own_action: np.ndarray, obs: np.ndarray) -> None:
         """One filter step; ``own_action`` ``(3,)`` normalised, ``obs`` ``(obs_size,)``.
         See :meth:`TrackerBank.step`."""
-        try:
-            act = np.asarray(own_action, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"own_action must be a numeric array, got {own_action!r}") from None
+        _real_data("own_action", own_action, "(3,)")
+        act = np.asarray(own_action, dtype=np.float64)
         if act.shape != (3,):
             raise ValueError(f"own_action must have shape (3,), got {act.shape}")
         if not np.all(np.isfinite(act)):
@@ -1345,7 +1387,7 @@ class NeighborTracker:
         return self._bank.particles_body(0)
 
     def particle_headings(self) -> np.ndarray:
-        """``(P_T,)`` relative headings of the particles (rad)."""
+        """``(P_T,)`` relative headings of the particles (rad); ``(0,)`` for N = 1."""
         return self._bank.particle_headings(0)
 
     def particle_modes(self) -> np.ndarray:
@@ -1407,22 +1449,18 @@ class VectorTrackerBank:
         return [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(self.n_agents)]
 
     def _seeds(self, seeds: Any, n: int) -> list[int | None]:
+        """``seeds``: None or ``n`` seeds (each None or an integer ≥ 0), one per copy."""
         if seeds is None:
             return [None] * n
-        out = list(seeds)
+        out = _items("seeds", seeds, f"{n} seeds (one per copy: integers >= 0 or None) or None")
         if len(out) != n:
             raise ValueError(f"seeds must hold {n} seeds (one per copy), got {len(out)}")
-        for s in out:
-            if s is not None and (isinstance(s, bool) or not isinstance(s, int | np.integer)):
-                raise ValueError(f"seeds must be ints or None, got {s!r}")
-        return out
+        return [check_seed(f"seeds[{k}]", s) for k, s in enumerate(out)]
 
     def _array(self, x: Any, name: str, tail: tuple[int, ...]) -> np.ndarray:
         B, N = self.n_copies, self.n_agents
-        try:
-            arr = np.asarray(x, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name} must be a numeric array, got {type(x).__name__}") from None
+        _real_data(name, x, str((B, N) + tail))
+        arr = np.asarray(x, dtype=np.float64)
         if arr.shape == (B * N,) + tail:
             arr = arr.reshape((B, N) + tail)
         if arr.shape != (B, N) + tail:
@@ -1439,6 +1477,8 @@ class VectorTrackerBank:
         if initial_poses_world is None:
             raise ValueError("initial_poses_world is required when init_mode='known'")
         B, N = self.n_copies, self.n_agents
+        shape_text = f"(n_copies, n_agents, 3) = ({B}, {N}, 3)"
+        _real_data("initial_poses_world", initial_poses_world, shape_text)
         init = np.asarray(initial_poses_world, dtype=np.float64)
         if init.shape != (B, N, 3):
             raise ValueError(
@@ -1471,19 +1511,19 @@ class VectorTrackerBank:
     def reset_copies(
         self, copies: Any, obs: Any, initial_poses_world: Any = None, seeds: Any = None
     ) -> None:
-        """Restart the copies ``copies`` (indices, or a ``(B,)`` bool mask) from their rows of
-        ``obs (B, N, obs_size)`` (and of ``initial_poses_world (B, N, 3)``), with one seed
-        per restarted copy; every other copy keeps all its numbers."""
+        """Restart the copies ``copies`` (one index or a sequence of distinct indices, integers
+        in ``[0, B − 1]``, or a ``(B,)`` bool mask) from their rows of ``obs (B, N,
+        obs_size)`` (and of ``initial_poses_world (B, N, 3)``), with one seed per restarted
+        copy; every other copy keeps all its numbers.
+
+        Raises:
+            ValueError: before :meth:`reset`; ``copies`` neither integer indices in range
+                (a float, even ``1.0``, is not an index) nor a ``(B,)`` bool mask; repeated
+                indices; bad ``obs``, ``initial_poses_world`` or ``seeds``.
+        """
         if not self._initialised:
             raise ValueError("reset_copies() called before reset()")
-        c = np.asarray(copies)
-        if c.dtype == bool:
-            if c.shape != (self.n_copies,):
-                raise ValueError(f"copies mask must have shape ({self.n_copies},), got {c.shape}")
-            c = np.flatnonzero(c)
-        c = c.astype(np.int64).reshape(-1)
-        if np.any((c < 0) | (c >= self.n_copies)) or np.unique(c).size != c.size:
-            raise ValueError(f"copies must be distinct indices in [0, {self.n_copies - 1}]")
+        c = self._copy_indices(copies)
         if c.size == 0:
             return
         seeds_l = self._seeds(seeds, c.size)
@@ -1507,6 +1547,32 @@ class VectorTrackerBank:
             )
             tmp.reset(obs_arr[g_rows], init)
             core.splice(rows, tmp)
+
+    def _copy_indices(self, copies: Any) -> np.ndarray:
+        """``copies`` of :meth:`reset_copies` as an int64 vector of distinct indices."""
+        B = self.n_copies
+        what = (
+            f"copies must be distinct copy indices (integers in [0, {B - 1}]) or a ({B},) bool mask"
+        )
+        try:
+            c = np.asarray(copies)
+        except Exception:  # ragged lists, objects whose __array__ fails
+            raise ConfigError(f"{what}, got {describe(copies)}") from None
+        if c.ndim > 1:
+            raise ConfigError(f"{what}, got an array of shape {c.shape}")
+        if c.dtype == bool:
+            if c.shape != (B,):
+                raise ConfigError(f"{what}; the mask has shape {c.shape}")
+            return np.flatnonzero(c)
+        if c.size == 0:  # no copy (``[]`` is a float array)
+            return np.zeros(0, dtype=np.int64)
+        # str, None, floats (0.7 is no index), complex, objects, bools mixed with ints
+        if c.dtype.kind not in "iu" or holds_bool(copies):
+            raise ConfigError(f"{what}, got {describe(copies)}")
+        out = c.astype(np.int64).reshape(-1)
+        if np.any((out < 0) | (out >= B)) or np.unique(out).size != out.size:
+            raise ConfigError(f"{what}, got {describe(copies)}")
+        return out
 
     def step(self, actions: Any, obs: Any) -> None:
         """One filter step of every robot of every copy: ``actions (B, N, 3)`` applied
@@ -1550,9 +1616,10 @@ class VectorTrackerBank:
     def positions_all(self) -> np.ndarray:
         """``p_body (B N, P_T, 2)`` m of every row, sorted by owner within a row (a new
         array; :meth:`particles_all` without the owners, which the safety rows do not need:
-        a row's blocks follow its neighbour columns, ``estimate().counts`` long each)."""
+        a row's blocks follow its neighbour columns, ``estimate().counts`` long each).
+        With no neighbour (N = 1) there are no particles: ``(B N, 0, 2)``."""
         self._check()
-        R, P = self._R, self._P
+        R, P = self._R, (self._P if self._M else 0)
         pts = np.empty((R, P, 2))
         for core, (s, e) in zip(self._cores, self._bounds, strict=True):
             pts[s:e, :, 0] = core._x
@@ -1561,11 +1628,11 @@ class VectorTrackerBank:
 
     def particles_all(self) -> tuple[np.ndarray, np.ndarray]:
         """``(p_body (B N, P_T, 2) m, owner (B N, P_T) neighbour ID)`` of every row, sorted
-        by owner within a row (new arrays)."""
+        by owner within a row (new arrays); ``(B N, 0, 2)`` and ``(B N, 0)`` for N = 1."""
         pts = self.positions_all()
         R, P = self._R, self._P
         if not self._M:
-            return pts, np.zeros((R, P), dtype=np.int64)
+            return pts, np.zeros((R, 0), dtype=np.int64)
         # blocks are contiguous and in neighbour order: each ID repeated by its count
         ids = np.concatenate([c._ids for c in self._cores])
         counts = np.concatenate([c._counts for c in self._cores])

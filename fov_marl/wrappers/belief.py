@@ -129,7 +129,8 @@ class BeliefFeaturizer:
         time_cap_s: clip of ``time_since_seen``, in (0, inf) s.
 
     Raises:
-        ValueError: bad ``init``, ``time_cap_s`` or tracker parameters.
+        ValueError: bad ``init``, ``time_cap_s`` or tracker parameters (also those the
+            team rules out: ``n_particles_total < N − 1``), here, before any reset.
     """
 
     def __init__(
@@ -161,6 +162,9 @@ class BeliefFeaturizer:
         n = self.config.n_agents
         if len(self.possible_agents) != n:
             raise ValueError(f"env has {len(self.possible_agents)} agents, its config {n}")
+        # the bank's own checks against the team (n_particles_total >= N - 1) now, not at
+        # the first reset() after the wrapped env was reset; it draws no number
+        TrackerBank(self.config, self.tracker_params, seed=0)
         self.n_neighbours = n - 1
         self.size = FEATURES_PER_NEIGHBOUR * self.n_neighbours
         d = self.config.arena_size_m * math.sqrt(2.0)

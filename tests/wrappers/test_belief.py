@@ -229,6 +229,19 @@ def test_invalid_arguments():
         BeliefObservationWrapper(fov_coverage_v0.vector_env(num_envs=2, n_agents=2))
 
 
+def test_tracker_budget_is_checked_against_the_team_at_construction():
+    """Red team 8: n_particles_total < N - 1 was accepted here and raised only at reset(),
+    after the wrapped env had been reset."""
+    with pytest.raises(ValueError, match=r"n_particles_total must be >= .* N - 1 = 3, got 2"):
+        BeliefObservationWrapper(_env(), tracker_params={"n_particles_total": 2})
+    with pytest.raises(ValueError, match=r"n_particles_total must be >= .* N - 1 = 3, got 2"):
+        BeliefFeaturizer(_env(), tracker_params={"n_particles_total": 2})
+    w = BeliefObservationWrapper(_env(), tracker_params={"n_particles_total": N - 1})
+    obs, _ = w.reset(seed=0)  # the smallest budget runs: one particle per neighbour
+    assert w.featurizer.bank.estimate().counts.sum(axis=1).tolist() == [N - 1] * N
+    assert obs["robot_0"].shape == w.observation_space("robot_0").shape
+
+
 def test_behind_the_safety_filter():
     wrappers = pytest.importorskip("fov_marl.wrappers")
     if not hasattr(wrappers, "SafetyFilterWrapper"):
