@@ -15,13 +15,16 @@ CPU time. ``cpu_ms_per_robot_step`` is the controller's wall-clock time (policy 
 safety filter, not the simulator) per robot per step. For the PF+CBF pipeline policies
 it is split per stage (``cpu_ms_by_stage``: ``tracker``, ``lloyd``, ``safety_rows``,
 ``qp`` from ``PfCbfPipeline.last_timings``, ``qp`` without the safety rows it contains,
-and ``other``, the rest of ``act``; they add up to the total) and per robot
-(``cpu_ms_by_robot``): robot i is charged its own controller's ``solve`` (timed around
-each call) plus an equal share of the team-batched stages (the tracker bank, Lloyd,
-the safety rows), so the per-robot values sum to the team's time. With the batched
-controller (the default, ``PfCbfPipeline(controller="auto")``) the QPs are solved for
-the whole team in one call, so every robot gets an equal share of the whole step; pass
-``controller="loop"`` to the policy to see each robot's own solve.
+``other``, the rest of ``act``, and, behind the safety filter, ``filter``: the
+wrapper's own time, :attr:`SafetyFilterWrapper.last_cpu_s`, its tracker and QPs; they
+add up to the total) and per robot (``cpu_ms_by_robot``): robot i is charged its own
+controller's ``solve`` (timed around each call) plus an equal share of the
+team-batched stages (the tracker bank, Lloyd, the safety rows, the filter), so the
+per-robot values sum to the team's time. With the batched controller (the default,
+``PfCbfPipeline(controller="auto")``) the QPs are solved for the whole team in one
+call, so every robot gets an equal share of the whole step; pass
+``controller="loop"`` to the policy to see each robot's own solve. Policies without
+a PF+CBF pipeline have no split (both fields None).
 """
 
 from __future__ import annotations
@@ -29,16 +32,26 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from fov_marl.baselines import make_policy
+from fov_marl.baselines import Policy, make_policy
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
 from fov_marl.infos import has_safety, metrics_of, safety_of
+from fov_marl.jsonio import jsonable
 from fov_marl.metrics import optimal_eta, time_to_eta
+from fov_marl.validation import (
+    check_bool,
+    check_int,
+    check_keys,
+    check_real,
+    check_seed,
+    describe,
+    keyword_parameters,
+)
 
 __all__ = [
     "EpisodeRecord",
@@ -75,19 +88,47 @@ def make_env(
     """Build a scenario's ParallelEnv, optionally behind the SafetyFilterWrapper.
 
     ``safety_filter_kwargs``: keywords of :class:`~fov_marl.wrappers.SafetyFilterWrapper`
-    (e.g. ``{"tracker_params": {"n_particles_total": 500}}``), used with ``safety_filter``.
+    (e.g. ``{"tracker_params": {"n_particles_total": 500}}``), used with ``safety_filter``
+    (a non-empty dict without it is an error, not ignored).
 
     Raises:
-        ValueError: unknown scenario or invalid config keyword/value.
+        ValueError: unknown scenario, invalid config keyword/value, ``safety_filter`` not
+            a bool, or ``safety_filter_kwargs`` not a dict of the filter's keywords (the
+            message lists them).
     """
-    if scenario not in SCENARIOS:
+    if not isinstance(scenario, str) or scenario not in SCENARIOS:
         raise ValueError(f"scenario must be one of {sorted(SCENARIOS)}, got {scenario!r}")
+    safety_filter = check_bool("safety_filter", safety_filter)
+    sf_kwargs = _check_filter_kwargs(safety_filter_kwargs, safety_filter)
     env = SCENARIOS[scenario].parallel_env(render_mode=render_mode, **kw)
     if safety_filter:
         from fov_marl.wrappers import SafetyFilterWrapper
 
-        env = SafetyFilterWrapper(env, **(safety_filter_kwargs or {}))
+        env = SafetyFilterWrapper(env, **sf_kwargs)
     return env
+
+
+def _check_filter_kwargs(value: Any, safety_filter: bool) -> dict[str, Any]:
+    """``safety_filter_kwargs``: None or a dict of :class:`SafetyFilterWrapper` keywords
+    (their values are the filter's to check), non-empty only with the filter."""
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise ValueError(
+            f"safety_filter_kwargs must be a dict of SafetyFilterWrapper keywords or None, "
+            f"got {describe(value)}"
+        )
+    from fov_marl.wrappers import SafetyFilterWrapper
+
+    valid = keyword_parameters(SafetyFilterWrapper.__init__, skip=2)
+    if valid is not None:
+        check_keys("safety_filter_kwargs", value, valid)
+    if value and not safety_filter:
+        raise ValueError(
+            f"safety_filter_kwargs {sorted(value)} need safety_filter=True (they configure "
+            "the filter)"
+        )
+    return dict(value)
 
 
 @dataclass
@@ -103,7 +144,8 @@ class EpisodeRecord:
     ``mean_time_to_arrive_s`` (mean over the robots that arrived of their first
     arrival). ``safety_violations`` counts D_s violation events (a pair entering D_s).
     ``eta_series`` and ``min_distance_series`` hold one value at reset and one per step
-    (sample k at ``k · dt_s``).
+    (sample k at ``k · dt_s``). ``min_distance`` (and its series) is inf for a one-robot
+    team (no pair; :meth:`to_json` writes it as None, :func:`summarize` leaves it out).
     None marks what does not apply or never happened.
     """
 
@@ -144,14 +186,37 @@ class EpisodeRecord:
     trajectory: list[list[list[float]]] = field(default_factory=list, repr=False)
 
     def to_json(self, with_series: bool = True) -> dict[str, Any]:
-        """JSON-ready dict of every field but ``trajectory``; ``with_series=False`` also
-        drops the per-step ``eta_series`` and ``min_distance_series``."""
+        """Standard-JSON-ready dict of every field but ``trajectory``;
+        ``with_series=False`` also drops the per-step ``eta_series`` and
+        ``min_distance_series``.
+
+        Non-finite floats become None, as :mod:`fov_marl.jsonio` writes them to files
+        (``json.dumps(..., allow_nan=False)`` accepts the dict): a one-robot team's
+        ``min_distance`` and ``min_distance_series`` (inf, no pair) are None.
+        :meth:`from_json` reads them back as inf."""
         d = dataclasses.asdict(self)
         if not with_series:
             d.pop("eta_series")
             d.pop("min_distance_series")
         d.pop("trajectory")
-        return d
+        return jsonable(d)
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> EpisodeRecord:
+        """The record of a :meth:`to_json` dict (keys that are not fields are ignored).
+
+        ``min_distance`` and the entries of ``min_distance_series`` given as None (no
+        pair: a one-robot team) are inf again, the value :func:`run_episode` records.
+        """
+        fields = set(cls.__dataclass_fields__)
+        d = {k: v for k, v in data.items() if k in fields}
+        if "min_distance" in d and d["min_distance"] is None:
+            d["min_distance"] = math.inf
+        if d.get("min_distance_series"):
+            d["min_distance_series"] = [
+                math.inf if x is None else x for x in d["min_distance_series"]
+            ]
+        return cls(**d)
 
 
 def run_episode(
@@ -174,16 +239,51 @@ def run_episode(
     Args:
         scenario: ``"coverage"`` or ``"crossing"``.
         policy: a registered name (``make_policy``) or a factory ``f(env) -> Policy``.
-        seed: seeds the env (start poses, camera noise) and the policy.
-        safety_filter: wrap the env in :class:`fov_marl.wrappers.SafetyFilterWrapper`.
-        max_steps: stop earlier than the env's ``max_cycles``.
-        record_trajectory: keep the ground-truth poses of every step.
-        stop_at_eta: end the episode once η reaches this value (saves time in sweeps
-            that only need the time to η = 0.99).
-        on_step: called as ``on_step(env, infos)`` after every step (rendering).
+        seed: seeds the env (start poses, camera noise) and the policy: None or an
+            integer >= 0.
+        safety_filter: wrap the env in :class:`fov_marl.wrappers.SafetyFilterWrapper`
+            (a bool).
+        max_steps: stop earlier than the env's ``max_cycles``: None (no earlier stop) or
+            an integer >= 0 (0 runs no step: the record of the start).
+        record_trajectory: keep the ground-truth poses of every step (a bool).
+        stop_at_eta: None, or end the episode once η reaches this value, a real in
+            [0, 1] (saves time in sweeps that only need the time to η = 0.99).
+        on_step: None or a callable, called as ``on_step(env, infos)`` after every step
+            (rendering).
+        policy_kwargs: None or a dict of the options of a registered policy
+            (``make_policy(policy, env, **policy_kwargs)``); a factory takes none.
         safety_filter_kwargs: keywords of the filter (:func:`make_env`).
         **env_kwargs: config fields for the env.
+
+    Raises:
+        ValueError: a bad argument (naming it and its allowed values), an unknown
+            policy or option, or an invalid config field.
     """
+    seed = check_seed("seed", seed)
+    if not isinstance(policy, str) and not callable(policy):
+        raise ValueError(
+            "policy must be a registered policy name (fov_marl.baselines.available_policies()) "
+            f"or a factory f(env) -> Policy, got {describe(policy)}"
+        )
+    if max_steps is not None:
+        max_steps = check_int("max_steps", max_steps, 0, note="(or None: the env's max_cycles)")
+    record_trajectory = check_bool("record_trajectory", record_trajectory)
+    if stop_at_eta is not None:
+        stop_at_eta = check_real("stop_at_eta", stop_at_eta, 0.0, 1.0, note="(or None)")
+    if on_step is not None and not callable(on_step):
+        raise ValueError(
+            f"on_step must be None or a callable on_step(env, infos), got {describe(on_step)}"
+        )
+    if policy_kwargs is not None and not isinstance(policy_kwargs, Mapping):
+        raise ValueError(
+            f"policy_kwargs must be a dict of policy options or None, got {describe(policy_kwargs)}"
+        )
+    if policy_kwargs and not isinstance(policy, str):
+        raise ValueError(
+            f"policy_kwargs {sorted(map(str, policy_kwargs))} apply to a registered policy name; "
+            f"the factory {getattr(policy, '__name__', describe(policy))} takes none "
+            "(bind its options in the factory)"
+        )
     env = make_env(
         scenario,
         safety_filter=safety_filter,
@@ -197,6 +297,12 @@ def run_episode(
         if isinstance(policy, str)
         else policy(env)
     )
+    if not isinstance(pol, Policy):
+        env.close()
+        raise ValueError(
+            f"policy factory {name} must return a Policy (with reset(seed) and act(obs)), "
+            f"got {describe(pol)}"
+        )
     cfg = env.unwrapped.config
     obs, infos = env.reset(seed=seed)
     pol.reset(seed=seed)
@@ -248,6 +354,10 @@ def run_episode(
         if has_safety(info0):
             have_filter = True
             t_filter = float(getattr(env, "last_cpu_s", 0.0))
+            if timings:
+                stage_s["filter"] = stage_s.get("filter", 0.0) + t_filter
+            if solve_s is not None:
+                robot_s += t_filter / n  # the filter runs for the team: equal shares
             saf = [safety_of(infos[a]) for a in infos]
             interventions += sum(int(x["intervened"]) for x in saf)
             fallbacks += sum(int(x["fallback"]) for x in saf)
@@ -433,7 +543,9 @@ def run_episodes(
     Args:
         scenario: ``"coverage"`` or ``"crossing"``.
         policy: a registered policy name or the path of a trained ``model.zip``.
-        seeds: one episode per seed, records in this order.
+        seeds: one episode per seed, records in this order: a list, tuple or 1-d array
+            of seeds, each None or an integer >= 0 (as :func:`run_episode` takes it; no
+            float, bool or string is converted).
         backend: ``"local"`` (this process or ``workers`` processes) or ``"ray"``.
         workers: local processes, or the CPUs of a local Ray started here.
         ray_address: an existing Ray cluster for ``backend="ray"``.
@@ -446,19 +558,34 @@ def run_episodes(
     Returns:
         The records, in seed order; the same numbers for any backend and worker count
         (only the wall-clock ``cpu_ms_*`` fields differ).
+
+    Raises:
+        ValueError: a bad argument (naming it; a bad seed as ``seeds[k]``).
     """
     from fov_marl.backends import map_jobs, progress_bar
     from fov_marl.config import make_config
 
+    if not isinstance(scenario, str) or scenario not in SCENARIOS:
+        raise ValueError(f"scenario must be one of {sorted(SCENARIOS)}, got {scenario!r}")
+    if isinstance(seeds, str | bytes | Mapping) or not isinstance(seeds, Sequence | np.ndarray):
+        raise ValueError(
+            f"seeds must be a list, tuple or 1-d array of seeds, got {describe(seeds)}"
+        )
+    if isinstance(seeds, np.ndarray) and seeds.ndim != 1:
+        raise ValueError(f"seeds must be a 1-d array, got shape {seeds.shape}")
+    checked = [check_seed(f"seeds[{k}]", s) for k, s in enumerate(seeds)]
+    safety_filter = check_bool("safety_filter", safety_filter)
+    progress = check_bool("progress", progress)
     extra = {"safety_filter_kwargs": safety_filter_kwargs} if safety_filter_kwargs else {}
     jobs = [
-        dict(scenario=scenario, policy=policy, seed=int(s), safety_filter=safety_filter,
+        dict(scenario=scenario, policy=policy, seed=s, safety_filter=safety_filter,
              **extra, **env_kwargs)
-        for s in seeds
+        for s in checked
     ]  # fmt: skip
     # the bar counts env steps, each episode at most ``limit`` (a model's own horizon
     # may differ: every episode then advances the bar by exactly ``limit``)
-    limit = int(env_kwargs.get("max_cycles") or make_config(scenario=scenario).max_cycles)
+    mc = env_kwargs.get("max_cycles")
+    limit = make_config(scenario=scenario, **({} if mc is None else {"max_cycles": mc})).max_cycles
     bar = progress_bar(len(jobs) * limit, "evaluate", "step", enabled=progress)
     counted = [0]
 
@@ -483,8 +610,7 @@ def run_episodes(
         )
     finally:
         bar.close()
-    fields = set(EpisodeRecord.__dataclass_fields__)
-    return [EpisodeRecord(**{k: v for k, v in r.items() if k in fields}) for r in results]
+    return [EpisodeRecord.from_json(r) for r in results]
 
 
 #: stages that ``PfCbfPipeline.last_timings`` times inside another: sub-stage -> parent
@@ -599,8 +725,10 @@ def _stats(
 ) -> dict[str, Any]:
     """n, missing, mean, std (ddof 1), 95% t-interval clipped to ``feasible``, min, max.
 
-    ``ci95`` is None for fewer than two values (no interval can be estimated)."""
+    Over the finite values: None, NaN and ±inf count in ``missing``. ``ci95`` is None
+    for fewer than two values (no interval can be estimated)."""
     v = np.asarray([x for x in values if x is not None], dtype=np.float64)
+    v = v[np.isfinite(v)]
     out: dict[str, Any] = {"n": int(v.size), "missing": len(values) - int(v.size)}
     if v.size == 0:
         return {**out, "mean": None, "std": None, "ci95": None, "min": None, "max": None}
@@ -634,7 +762,10 @@ def summarize(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     The interval is clipped to the field's feasible range (:data:`FEASIBLE`; robots
     arrived also to ``[0, n_agents]``) and is None with fewer than two values.
     ``time_to_eta_99``, ``time_to_eta_norm_s`` and ``time_to_arrival_s`` ignore episodes
-    that never got there and report how many in ``missing``.
+    that never got there and report how many in ``missing``. Likewise every statistic
+    is over the finite values only: ``min_distance`` of a one-robot team is inf (no
+    pair), so such episodes count in ``missing``, and with no finite value at all the
+    entry's ``mean``, ``std``, ``ci95``, ``min`` and ``max`` are None (never NaN or inf).
     """
     out: dict[str, Any] = {"episodes": len(records)}
     n_max = max((r.n_agents for r in records), default=0)

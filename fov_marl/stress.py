@@ -18,7 +18,8 @@ key                         meaning
 ``violation_robot_steps``   robot-steps in which the robot is closer than D_s to some teammate
                             (ground truth ``env.unwrapped.poses``, after each step)
 ``min_distance_m``          smallest pairwise centre distance over all episodes (m),
-                            ``metrics["min_distance_episode"]``, the start included
+                            ``metrics["min_distance_episode"]``, the start included;
+                            None for a one-robot team (no pair; the env's metric is inf)
 ``robot_steps``             robot-steps run (Σ over steps of the live robots)
 ``intervention_rate``       fraction of robot-steps with ``infos[a]["safety/intervened"]``
 ``mean_action_change``      mean over robot-steps of ‖u − u*‖₂ in action units (the
@@ -100,7 +101,14 @@ from fov_marl.adversaries import (
 from fov_marl.infos import metrics_of, safety_of
 from fov_marl.jsonio import write_json
 from fov_marl.metrics import chatter_flips
-from fov_marl.validation import MAX_SEED, check_writable
+from fov_marl.validation import (
+    MAX_SEED,
+    check_int,
+    check_keys,
+    check_writable,
+    describe,
+    keyword_parameters,
+)
 
 __all__ = [
     "StressCase",
@@ -133,7 +141,7 @@ class StressCase:
 
     Attributes:
         adversary: name from :func:`fov_marl.adversaries.available_adversaries`.
-        n_agents: team size N (>= 1).
+        n_agents: team size N (an integer >= 1, as the scenario config takes it).
         fov_deg: camera amplitude β in degrees, (0, 360].
         start: name from :func:`fov_marl.adversaries.available_starts`.
         filtered: run behind :class:`~fov_marl.wrappers.SafetyFilterWrapper`.
@@ -141,9 +149,14 @@ class StressCase:
         env_kwargs: extra config fields for the env (not ``n_agents``, ``fov_deg``,
             ``max_cycles``, ``initial_poses``, which the case sets).
         filter_kwargs: keywords of ``SafetyFilterWrapper(env, **filter_kwargs)``
-            (e.g. ``{"controller_params": {...}}``).
+            (e.g. ``{"controller_params": {...}}``); only for a filtered case.
         adversary_kwargs: options of the adversary (``make_adversary(name, env, **kw)``).
         start_kwargs: options of the start (``make_start_poses(start, cfg, rng, **kw)``).
+
+    Raises:
+        ValueError: a field of the wrong type or out of its range (naming it): the four
+            ``*_kwargs`` must be mappings with string keys, ``filter_kwargs`` only the
+            filter's keywords.
     """
 
     adversary: str
@@ -158,27 +171,40 @@ class StressCase:
     start_kwargs: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if self.adversary not in available_adversaries():
+        if not isinstance(self.adversary, str) or self.adversary not in available_adversaries():
             raise ValueError(
                 f"adversary must be one of {available_adversaries()}, got {self.adversary!r}"
             )
-        if self.start not in available_starts():
+        if not isinstance(self.start, str) or self.start not in available_starts():
             raise ValueError(f"start must be one of {available_starts()}, got {self.start!r}")
-        if self.scenario not in _SCENARIOS:
+        if not isinstance(self.scenario, str) or self.scenario not in _SCENARIOS:
             raise ValueError(f"scenario must be one of {_SCENARIOS}, got {self.scenario!r}")
         if not isinstance(self.filtered, bool | np.bool_):
             raise ValueError(f"filtered must be a bool, got {self.filtered!r}")
-        if self.start == "head_on_pair" and self.n_agents < 2:
-            raise ValueError(f"start 'head_on_pair' needs n_agents >= 2, got {self.n_agents}")
+        for name in ("env_kwargs", "filter_kwargs", "adversary_kwargs", "start_kwargs"):
+            value = getattr(self, name)
+            if not isinstance(value, Mapping):
+                raise ValueError(f"{name} must be a mapping, got {describe(value)}")
+            keys = [k for k in value if not isinstance(k, str)]
+            if keys:
+                raise ValueError(f"{name} keys must be strings, got {keys[0]!r}")
         fixed = {"n_agents", "fov_deg", "max_cycles", "initial_poses"} & set(self.env_kwargs)
         if fixed:
             raise ValueError(
                 f"env_kwargs must not set {sorted(fixed)}: the case's own fields and the "
                 "sweep's steps/start set them"
             )
-        for name in ("env_kwargs", "filter_kwargs", "adversary_kwargs", "start_kwargs"):
-            if not isinstance(getattr(self, name), Mapping):
-                raise ValueError(f"{name} must be a mapping, got {getattr(self, name)!r}")
+        if self.filter_kwargs:
+            if not self.filtered:
+                raise ValueError(
+                    f"filter_kwargs {sorted(self.filter_kwargs)} need filtered=True (they "
+                    "configure the safety filter)"
+                )
+            from fov_marl.wrappers import SafetyFilterWrapper
+
+            valid = keyword_parameters(SafetyFilterWrapper.__init__, skip=2)
+            if valid is not None:
+                check_keys("filter_kwargs", self.filter_kwargs, valid)
         from fov_marl.config import make_config
 
         # n_agents and fov_deg (and env_kwargs) validated by the scenario config
@@ -188,17 +214,39 @@ class StressCase:
             fov_deg=self.fov_deg,
             **dict(self.env_kwargs),
         )
+        if self.start == "head_on_pair" and self.n_agents < 2:
+            raise ValueError(f"start 'head_on_pair' needs n_agents >= 2, got {self.n_agents}")
 
     @classmethod
     def coerce(cls, case: StressCase | Sequence[Any] | Mapping[str, Any]) -> StressCase:
-        """A :class:`StressCase` from itself, a tuple of its fields in order, or a dict."""
+        """A :class:`StressCase` from itself, a tuple of its fields in order (3 to 10:
+        ``adversary``, ``n_agents``, ``fov_deg`` required), or a dict of its fields.
+
+        Raises:
+            ValueError: anything else, a dict with an unknown or without a required
+                field, a tuple of another length, or an invalid field (naming it).
+        """
+        names = list(cls.__dataclass_fields__)
+        required = names[:3]
         if isinstance(case, StressCase):
             return case
         if isinstance(case, Mapping):
+            check_keys("stress case fields", case, names)
+            missing = [k for k in required if k not in case]
+            if missing:
+                raise ValueError(
+                    f"a stress case needs the fields {required}, missing {missing} in "
+                    f"{describe(case)}"
+                )
             return cls(**case)
-        if isinstance(case, Sequence) and not isinstance(case, str):
+        if isinstance(case, Sequence) and not isinstance(case, str | bytes):
+            if not len(required) <= len(case) <= len(names):
+                raise ValueError(
+                    f"a stress case tuple holds {len(required)} to {len(names)} fields in "
+                    f"the order {names}, got {len(case)}: {describe(case)}"
+                )
             return cls(*case)
-        raise ValueError(f"a stress case must be a StressCase, tuple or dict, got {case!r}")
+        raise ValueError(f"a stress case must be a StressCase, tuple or dict, got {describe(case)}")
 
     def describe(self) -> dict[str, Any]:
         """JSON-friendly dict of the case's fields."""
@@ -233,8 +281,10 @@ def run_stress_episode(
 
     Args:
         case: the case (see :class:`StressCase`).
-        seed: seeds the env and the filter; start poses and adversary use child seeds.
-        steps: episode length (the env's ``max_cycles``); crossing may end earlier.
+        seed: seeds the env and the filter (an integer >= 0); start poses and adversary
+            use child seeds.
+        steps: episode length (the env's ``max_cycles``, an integer >= 1); crossing may
+            end earlier.
         on_step: called after every step (progress), if given.
 
     Returns:
@@ -243,9 +293,16 @@ def run_stress_episode(
         "action_change_sum", "fallbacks", "statuses", "chatter_events",
         "filter_chatter_events"}`` (the filter
         entries are None when unfiltered; ``first_collision_step`` None when there was
-        none).
+        none; ``min_distance_m`` None for a one-robot team, which has no pair).
+
+    Raises:
+        ValueError: a bad case, seed, steps or on_step (naming it).
     """
     case = StressCase.coerce(case)
+    seed = check_int("seed", seed, 0)
+    steps = check_int("steps", steps, 1)
+    if on_step is not None and not callable(on_step):
+        raise ValueError(f"on_step must be None or a callable, got {describe(on_step)}")
     env = _make_env(case, seed, steps)
     base = env.unwrapped
     adversary = make_adversary(case.adversary, env, **dict(case.adversary_kwargs))
@@ -310,7 +367,7 @@ def run_stress_episode(
         "first_collision_step": first_collision,
         "violation_events": int(metrics["safety_violations_total"]),
         "violation_robot_steps": viol_rs,
-        "min_distance_m": float(metrics["min_distance_episode"]),
+        "min_distance_m": float(metrics["min_distance_episode"]) if n > 1 else None,
         "intervened": intervened if case.filtered else None,
         "action_change_sum": du_sum if case.filtered else None,
         "fallbacks": fallbacks if case.filtered else None,
@@ -345,7 +402,9 @@ def _aggregate(case: StressCase, eps: list[dict[str, Any]], steps: int) -> dict[
         "collision_seeds": [e["seed"] for e in eps if e["collisions"] > 0],
         "violation_events": sum(e["violation_events"] for e in eps),
         "violation_robot_steps": sum(e["violation_robot_steps"] for e in eps),
-        "min_distance_m": min(e["min_distance_m"] for e in eps),
+        "min_distance_m": min(
+            (e["min_distance_m"] for e in eps if e["min_distance_m"] is not None), default=None
+        ),
         "intervention_rate": None,
         "mean_action_change": None,
         "fallbacks": None,
@@ -413,7 +472,17 @@ def run_stress(
     """
     from fov_marl.backends import map_jobs
 
+    if isinstance(cases, StressCase | Mapping | str | bytes) or not isinstance(cases, Iterable):
+        raise ValueError(
+            "cases must be a list of cases (StressCase objects, tuples or dicts), got "
+            f"{describe(cases)}"
+            + ("; wrap one case in a list" if isinstance(cases, StressCase | Mapping) else "")
+        )
     cases = [StressCase.coerce(c) for c in cases]
+    if progress is not None and not callable(progress):
+        raise ValueError(
+            f"progress must be None or a callable progress(done, total), got {describe(progress)}"
+        )
     for name, v in (("episodes", episodes), ("steps", steps), ("workers", workers)):
         if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
             raise ValueError(f"{name} must be a positive integer, got {v!r}")

@@ -70,6 +70,8 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
+import zlib
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -78,6 +80,7 @@ import numpy as np
 
 from fov_marl.baselines.registry import register_policy
 from fov_marl.spaces import CUE_SIZE, SLOT_SIZE
+from fov_marl.validation import check_bool, check_real, check_real_sequence, describe
 
 __all__ = [
     "MODEL_FORMAT",
@@ -192,34 +195,101 @@ def _check_format(config: Any, where: str) -> dict[str, Any]:
     return config
 
 
+def _scale(where: str, scales: dict[str, Any], key: str, default: float | None = None) -> float:
+    """``feature_scales[key]``: a finite real > 0 (a divisor of the features)."""
+    if key not in scales:
+        if default is not None:
+            return default
+        raise ValueError(f"{where}: feature_scales.{key} is missing (a length in metres > 0)")
+    try:
+        return check_real(f"feature_scales.{key}", scales[key], 0.0, lo_open=True)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def _weight_array(where: str, name: str, value: Any) -> np.ndarray:
+    """A weight as float64: a numeric array of finite values (naming it otherwise)."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iuf":
+        raise ValueError(f"{where}: {name} must be a numeric array, got dtype {arr.dtype}")
+    arr = arr.astype(np.float64)
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.count_nonzero(~np.isfinite(arr)))
+        raise ValueError(
+            f"{where}: {name} must be finite, got {bad} non-finite value(s) (NaN or inf) "
+            f"of {arr.size}"
+        )
+    return arr
+
+
 class SetActorWeights:
     """The exported actor: weights and config, with a vectorised numpy forward pass.
 
     Args:
-        weights: name -> array (``weights.npz``, module docstring).
-        config: the model's ``config.json`` contents.
+        weights: name -> array (``weights.npz``, module docstring); every array numeric
+            and finite (NaN or inf would make every action NaN).
+        config: the model's ``config.json`` contents; ``feature_scales.neighbour_m``,
+            ``arena_half_m`` (finite, > 0) and ``arena_centre_m`` (2 finite reals) are
+            required, ``count`` (finite, > 0) defaults to 5; ``arch.activation``
+            (``"tanh"``/``"relu"``, default tanh) and ``arch.bounded_mean`` (a bool,
+            default False) are optional.
+        where_weights, where_config: how messages name the two (:meth:`load` passes the
+            files' paths).
 
     Raises:
-        ValueError: a missing or mis-shaped weight, or a config of another format.
+        ValueError: a missing, mis-shaped or non-finite weight, a missing or invalid
+            feature scale, or a config of another format (naming the file and field).
     """
 
-    def __init__(self, weights: dict[str, np.ndarray], config: dict[str, Any]) -> None:
-        self.config = _check_format(config, "config")
+    def __init__(
+        self,
+        weights: dict[str, np.ndarray],
+        config: dict[str, Any],
+        *,
+        where_weights: str = "weights",
+        where_config: str = "config",
+    ) -> None:
+        self._where_w = where_weights
+        self.config = _check_format(config, where_config)
+        if not isinstance(weights, dict):
+            raise ValueError(f"{where_weights}: must be a dict of arrays, got {describe(weights)}")
         arch = config["arch"]
-        self.activation: str = str(arch.get("activation", "tanh"))
-        self.bounded_mean = bool(arch.get("bounded_mean", False))
-        _act(self.activation, np.zeros(1))
+        self.activation: str = arch.get("activation", "tanh")
+        if self.activation not in ("relu", "tanh"):
+            raise ValueError(
+                f"{where_config}: arch.activation must be one of ['relu', 'tanh'], "
+                f"got {describe(self.activation)}"
+            )
+        try:
+            self.bounded_mean = check_bool("arch.bounded_mean", arch.get("bounded_mean", False))
+        except ValueError as exc:
+            raise ValueError(f"{where_config}: {exc}") from None
         scales = config["feature_scales"]
-        self.neighbour_m = float(scales["neighbour_m"])
-        self.half_m = float(scales["arena_half_m"])
-        self.centre_m = np.asarray(scales["arena_centre_m"], dtype=np.float64)
-        self.count_scale = float(scales.get("count", 5.0))
-        self.w = {k: np.asarray(v, dtype=np.float64) for k, v in weights.items()}
+        self.neighbour_m = _scale(where_config, scales, "neighbour_m")
+        self.half_m = _scale(where_config, scales, "arena_half_m")
+        if "arena_centre_m" not in scales:
+            raise ValueError(
+                f"{where_config}: feature_scales.arena_centre_m is missing (the arena centre "
+                "[x, y] in metres)"
+            )
+        try:
+            centre = check_real_sequence(
+                "feature_scales.arena_centre_m", scales["arena_centre_m"], 2
+            )
+        except ValueError as exc:
+            raise ValueError(f"{where_config}: {exc}") from None
+        self.centre_m = np.asarray(centre, dtype=np.float64)
+        self.count_scale = _scale(where_config, scales, "count", 5.0)
+        self.w = {}
+        for k, v in weights.items():
+            if not isinstance(k, str):
+                raise ValueError(f"{where_weights}: weight names must be strings, got {k!r}")
+            self.w[k] = _weight_array(where_weights, k, v)
         self.phi = self._layers("phi")
         self.cue = self._layers("cue")
         self.head = self._layers("head")
         if "action.weight" not in self.w or "action.bias" not in self.w:
-            raise ValueError("weights: action.weight and action.bias are required")
+            raise ValueError(f"{where_weights}: action.weight and action.bias are required")
         self.action = (self.w["action.weight"], self.w["action.bias"])
         hid = self.phi[-1][0].shape[0]
         want_in = {
@@ -230,27 +300,35 @@ class SetActorWeights:
         for name, layers in (("phi", self.phi), ("cue", self.cue), ("head", self.head)):
             if layers[0][0].shape[1] != want_in[name]:
                 raise ValueError(
-                    f"weights: {name}.0.weight must take {want_in[name]} inputs, "
+                    f"{where_weights}: {name}.0.weight must take {want_in[name]} inputs, "
                     f"got shape {layers[0][0].shape}"
                 )
         if self.action[0].shape != (3, self.head[-1][0].shape[0]):
-            raise ValueError(f"weights: action.weight has shape {self.action[0].shape}")
+            raise ValueError(
+                f"{where_weights}: action.weight must have shape "
+                f"{(3, self.head[-1][0].shape[0])}, got {self.action[0].shape}"
+            )
+        if self.action[1].shape != (3,):
+            raise ValueError(
+                f"{where_weights}: action.bias must have shape (3,), got {self.action[1].shape}"
+            )
 
     def _layers(self, prefix: str) -> list[tuple[np.ndarray, np.ndarray]]:
+        where = self._where_w
         out = []
         k = 0
         while f"{prefix}.{k}.weight" in self.w:
             W, b = self.w[f"{prefix}.{k}.weight"], self.w.get(f"{prefix}.{k}.bias")
             if W.ndim != 2 or b is None or b.shape != (W.shape[0],):
                 raise ValueError(
-                    f"weights: {prefix}.{k} must be a (out, in) weight and (out,) bias"
+                    f"{where}: {prefix}.{k} must be a (out, in) weight and (out,) bias"
                 )
             if out and W.shape[1] != out[-1][0].shape[0]:
-                raise ValueError(f"weights: {prefix}.{k}.weight does not chain onto layer {k - 1}")
+                raise ValueError(f"{where}: {prefix}.{k}.weight does not chain onto layer {k - 1}")
             out.append((W, b))
             k += 1
         if not out:
-            raise ValueError(f"weights: no {prefix}.0.weight")
+            raise ValueError(f"{where}: no {prefix}.0.weight")
         return out
 
     @classmethod
@@ -258,8 +336,14 @@ class SetActorWeights:
         """Load a model folder holding ``weights.npz`` and ``config.json``.
 
         Raises:
-            ValueError: a missing or unreadable file (the message names it).
+            ValueError: a missing or unreadable file (truncated, corrupted, not an
+                ``.npz``), or invalid contents (:class:`SetActorWeights`); the message
+                names the file and the field.
         """
+        if not isinstance(path, str | os.PathLike):
+            raise ValueError(
+                f"path must be a model folder (str or os.PathLike), got {describe(path)}"
+            )
         d = Path(path)
         cfg_path, w_path = d / "config.json", d / "weights.npz"
         for p in (cfg_path, w_path):
@@ -271,11 +355,23 @@ class SetActorWeights:
             raise ValueError(f"{cfg_path}: not a readable JSON file ({exc})") from None
         _check_format(config, str(cfg_path))
         try:
-            with np.load(w_path, allow_pickle=False) as z:
+            z = np.load(w_path, allow_pickle=False)
+            if not isinstance(z, np.lib.npyio.NpzFile):  # a bare .npy array
+                raise ValueError("a single array, not an .npz archive of named arrays")
+            with z:
                 weights = {k: z[k] for k in z.files}
-        except (OSError, ValueError, EOFError) as exc:
-            raise ValueError(f"{w_path}: not a readable .npz file ({exc})") from None
-        return cls(weights, config)
+        except (
+            OSError,
+            ValueError,
+            EOFError,
+            KeyError,
+            NotImplementedError,
+            zipfile.BadZipFile,
+            zlib.error,
+        ) as exc:
+            reason = " ".join(str(exc).split()) or type(exc).__name__
+            raise ValueError(f"{w_path}: not a readable .npz file ({reason})") from None
+        return cls(weights, config, where_weights=str(w_path), where_config=str(cfg_path))
 
     def _mlp(self, layers: list[tuple[np.ndarray, np.ndarray]], x: np.ndarray) -> np.ndarray:
         for W, b in layers:
@@ -317,12 +413,23 @@ class LearnedSetPolicy:
     batched forward pass. Stateless and deterministic (``reset`` only records the seed).
 
     Args:
-        env: the env the policy acts in (any N; its observation layout is checked).
+        env: the env the policy acts in (any N). Its observations must have the fov
+            layout, ``5 (N − 1) + 7`` entries for the ``N = env.unwrapped.config.n_agents``
+            robots: a wrapper that appends entries (``BeliefObservationWrapper``) is
+            refused, as the policy would read them as extra neighbour slots.
         path: a model folder (``weights.npz`` + ``config.json``); default the shipped
             model (:func:`shipped_model_dir`).
+
+    Raises:
+        ValueError: an unreadable or invalid model folder (:meth:`SetActorWeights.load`)
+            or an observation layout the policy cannot read.
     """
 
     def __init__(self, env: Any, path: str | os.PathLike | None = None) -> None:
+        if path is not None and not isinstance(path, str | os.PathLike):
+            raise ValueError(
+                f"path must be a model folder (str or os.PathLike) or None, got {describe(path)}"
+            )
         self.model_dir = Path(path) if path is not None else shipped_model_dir()
         self.model = SetActorWeights.load(self.model_dir)
         self.config = self.model.config
@@ -330,7 +437,20 @@ class LearnedSetPolicy:
         self.agents = list(getattr(base, "possible_agents", []))
         space = env.observation_space(self.agents[0]) if self.agents else None
         if space is not None:
-            n_slots_of(int(np.prod(space.shape)))
+            dim = int(np.prod(space.shape))
+            n_agents = getattr(getattr(base, "config", None), "n_agents", None)
+            if isinstance(n_agents, int) and not isinstance(n_agents, bool):
+                want = SLOT_SIZE * (n_agents - 1) + CUE_SIZE
+                if dim != want:
+                    raise ValueError(
+                        f"the learned policy reads the fov observation layout, "
+                        f"{SLOT_SIZE} (N - 1) + {CUE_SIZE} = {want} entries for n_agents = "
+                        f"{n_agents}, but {type(env).__name__}'s observations have {dim} "
+                        "(a wrapper that changes observations, e.g. BeliefObservationWrapper, "
+                        "cannot be used with it)"
+                    )
+            else:
+                n_slots_of(dim)
         self._seed: int | None = None
 
     def reset(self, seed: int | None = None) -> None:
