@@ -88,6 +88,7 @@ from fov_marl.validation import (
     ConfigError,
     check_keys,
     check_real,
+    check_seed,
     describe,
     fov_parallel_base,
 )
@@ -185,6 +186,7 @@ class BeliefFeaturizer:
             obs: ``agent -> observation`` of every robot (the env's layout).
             seed: seeds the generator the tracker seeds are drawn from (see module).
         """
+        seed = check_seed("seed", seed)
         if seed is not None or self._seed_rng is None:
             self._seed_rng = np.random.default_rng(seed)
         self.tracker_seed = int(self._seed_rng.integers(0, 2**63 - 1))
@@ -199,10 +201,12 @@ class BeliefFeaturizer:
         """One tracker step per robot with its own action and its new observation."""
         if self.bank is None:
             raise ValueError("BeliefFeaturizer.step() called before reset()")
-        act = np.stack(
-            [np.asarray(actions[a], dtype=np.float64).reshape(-1) for a in self.possible_agents]
-        )
-        self.bank.step(act, self._obs(obs))
+        if not isinstance(actions, Mapping):
+            raise ValueError(
+                f"actions must be a dict agent -> (3,) action, got {describe(actions)}"
+            )
+        # the bank checks each robot's action (present, real, finite, (3,)), naming it
+        self.bank.step(actions, self._obs(obs))
         return self.features()
 
     def _obs(self, obs: Mapping[str, np.ndarray]) -> np.ndarray:

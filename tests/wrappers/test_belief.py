@@ -254,3 +254,33 @@ def test_behind_the_safety_filter():
     while env.agents:
         obs, *_ = env.step(_actions(rng, env.agents))
         assert all(env.observation_space(a).contains(o) for a, o in obs.items())
+
+
+def test_featurizer_checks_its_seed_and_actions():
+    """Called directly (the learned policy computes its own features), a bad seed or
+    action was numpy's message or a KeyError; the numbers of valid calls are unchanged."""
+    from fov_marl.envs import fov_coverage_v0
+    from fov_marl.wrappers.belief import BeliefFeaturizer
+
+    env = fov_coverage_v0.parallel_env(n_agents=3, max_cycles=5)
+    obs, _ = env.reset(seed=0)
+    feat = BeliefFeaturizer(env, tracker_params={"n_particles_total": 60})
+    for bad in (-1, 1.5, "a"):
+        with pytest.raises(ValueError, match="seed"):
+            feat.reset(obs, seed=bad)
+    f0 = feat.reset(obs, seed=3)
+    act = {a: np.array([0.5, 0.0, 0.1]) for a in env.agents}
+    obs2, *_ = env.step(act)
+    with pytest.raises(ValueError, match="actions must be a dict"):
+        feat.step(np.zeros((3, 3)), obs2)
+    with pytest.raises(ValueError, match="robot_2"):
+        feat.step({a: act[a] for a in env.agents[:2]}, obs2)
+    with pytest.raises(ValueError, match="robot_1"):
+        feat.step({**act, "robot_1": "abc"}, obs2)
+    f1 = feat.step(act, obs2)
+    # the same episode again, actions as lists: the same features
+    obs, _ = env.reset(seed=0)
+    again = BeliefFeaturizer(env, tracker_params={"n_particles_total": 60})
+    np.testing.assert_array_equal(again.reset(obs, seed=3), f0)
+    obs2, *_ = env.step(act)
+    np.testing.assert_array_equal(again.step({a: list(v) for a, v in act.items()}, obs2), f1)
