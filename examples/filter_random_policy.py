@@ -3,7 +3,7 @@
     python examples/filter_random_policy.py
 
 The same seeded random actions drive a team without and with the filter; the filter
-changes an action only when a CBF row would be violated (``infos[a]["safety"]``).
+changes an action only when a CBF row would be violated (``safety_of(infos[a])``).
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from _common import steps
 
 from fov_marl.baselines import make_policy
 from fov_marl.envs import fov_coverage_v0
+from fov_marl.infos import metrics_of, safety_of
 from fov_marl.wrappers import SafetyFilterWrapper
 
 
@@ -26,8 +27,8 @@ def run(filtered: bool, seed: int = 0) -> dict:
     while env.agents:
         obs, _, _, _, infos = env.step(policy.act(obs))
         if filtered:
-            interventions += sum(bool(infos[a]["safety"]["intervened"]) for a in infos)
-    metrics = next(iter(infos.values()))["metrics"]
+            interventions += sum(bool(safety_of(infos[a])["intervened"]) for a in infos)
+    metrics = metrics_of(next(iter(infos.values())))
     env.close()
     return {
         "collisions": int(metrics["collisions_total"]),

@@ -548,7 +548,7 @@ def build_parser() -> argparse.ArgumentParser:
             "--seed",
             type=_int_in("--seed", 0, MAX_SEED),
             default=0,
-            help=f"first seed in [0, {MAX_SEED}]; episode k uses seed + k",
+            help=f"first seed in [0, {MAX_SEED}]; episode k uses seed + k (default: 0)",
         )
         sp.add_argument(
             "--safety-filter",

@@ -740,7 +740,7 @@ def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
         "--seed",
         type=_non_negative_int("--seed", MAX_SEED),
         default=0,
-        help=f"first seed in [0, {MAX_SEED}]; episode k uses seed + k",
+        help=f"first seed in [0, {MAX_SEED}]; episode k uses seed + k (default: 0)",
     )
     p.add_argument(
         "--workers",

@@ -127,9 +127,10 @@ seeds (β = 120°) keep ≥ 2.27 m.
 Motion cone ("look where you go", ``ControllerParams.motion_cone``)
 ===================================================================
 
-Not in the paper; see :func:`motion_cone_rows`. Used by
-:class:`~fov_marl.wrappers.SafetyFilterWrapper`, where an arbitrary policy may drive a
-robot towards neighbours it cannot see (and whose estimates are then stale).
+Not in the paper; see :func:`motion_cone_rows`. Off by default, also in
+:class:`~fov_marl.wrappers.SafetyFilterWrapper` (whose first version's blanket cone
+changed 96% of random actions; its blind travel budget bounds motion towards what the
+robot cannot see instead); selectable with ``ControllerParams(motion_cone=True)``.
 """
 
 from __future__ import annotations

@@ -97,8 +97,8 @@ field                        default   source / reason
                                        of travel before it must look there
                                        (:func:`~fov_marl.control.safety.
                                        blind_travel_step`); 0 disables (the
-                                       safety filter and pfcbf in coverage use
-                                       1.0 m; pfcbf in crossing 0)
+                                       safety filter uses 0.5 m, pfcbf in
+                                       coverage 1.0 m, pfcbf in crossing 0)
 ``blind_travel_memory_s``    30.0      T: time constant (s) of the leak of the blind
                                        travel (jitter is forgiven, persistence is not);
                                        inf: no leak (the safety filter: with 30 s a
@@ -239,8 +239,8 @@ field                        default   source / reason
 ``safety_hard``              False     True: safety rows take no κ (infeasible → brake)
 ``safety_speed_margin_mps``  0.0       robust margin on the neighbour's speed estimate
                                        (paper: 0); see :func:`~fov_marl.control.cbf.cbf_rows`.
-                                       :class:`~fov_marl.wrappers.SafetyFilterWrapper`
-                                       uses 0.5
+                                       The safety filter keeps 0 (its rows on the
+                                       uncertainty assume the neighbour's share)
 ``fov_recovery_cap``         0.8       c: a FoV row that is violated (h + ε < 0, the
                                        neighbour out of view or its mean beyond R_d) is
                                        *recovered by turning the camera*: its translation
@@ -270,9 +270,11 @@ field                        default   source / reason
                                        motion_cone_rows`). Off for ``pfcbf``
                                        (it deadlocks the dense crossing encounter: a robot
                                        holding a neighbour in view can only creep to its
-                                       goal), on in :class:`~fov_marl.wrappers.
-                                       SafetyFilterWrapper`, whose arbitrary policies
-                                       otherwise drive robots blind into neighbours
+                                       goal) and for :class:`~fov_marl.wrappers.
+                                       SafetyFilterWrapper` (its first version's blanket
+                                       cone changed 96% of random actions; the blind
+                                       travel budget bounds blind motion instead);
+                                       ``controller_params={"motion_cone": True}``
 ``cone_half_angle_deg``      20.0      a, half-angle of the full-speed cone (capped at β/2);
                                        at 30° off axis 0.22 m/s remain, at 45° 0.11 m/s
 ``blind_speed_mps``          0.05      v_b: floor of the blind rows (a robot may always

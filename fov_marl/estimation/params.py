@@ -63,6 +63,12 @@ field                              default     reason
                                                the safety filter uses 0.2 (its
                                                ``FILTER_TRACKER_DEFAULTS`` say why; see
                                                the tracker's step 4)
+``recovery_reseed``                ``local``   a neighbour whose particles the view
+                                               deleted (Eq. 4) is re-seeded outside F_i
+                                               in a disc around the deleted cloud
+                                               (``arena``: over the whole arena)
+``recovery_local_margin_m``        2.5         margin of that disc beyond the deleted
+                                               cloud's extent (m)
 ``ego_motion``                     ``action``  own motion from the applied action (Eq. 2);
                                                ``pose``: from the own pose in consecutive
                                                observations

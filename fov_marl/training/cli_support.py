@@ -141,14 +141,14 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         default=_DEFAULT_TIMESTEPS,
         help="robot-steps (samples) to train for, in [1, 1e12]; 1e6 notation accepted. "
         "SB3 runs whole rollouts, so this is rounded up to a multiple of n_steps x n_envs x "
-        "n_agents for PPO (6144 at the defaults), of train_freq x n_envs x n_agents for SAC; "
-        "the effective number is printed before training starts",
+        "n_agents for PPO (6144 = 256 x 4 x 6 unless changed), of train_freq x n_envs x n_agents for SAC; "
+        "the effective number is printed before training starts (default: 1e6)",
     )
     parser.add_argument(
         "--seed",
         type=_int_in("--seed", 0, MAX_SEED),
         default=0,
-        help=f"seeds SB3 and the env copies (copy k: seed + k), in [0, {MAX_SEED}]",
+        help=f"seeds SB3 and the env copies (copy k: seed + k), in [0, {MAX_SEED}] (default: 0)",
     )
     parser.add_argument(
         "--out",
@@ -215,7 +215,7 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         metavar="KEY=VALUE",
         help="SB3 hyper-parameter override, repeatable (e.g. --hp n_steps=128); unknown keys "
-        "and bad values are errors naming the key (see fov_marl.training.HYPERPARAM_SPECS)",
+        "and bad values are errors naming the key (see fov_marl.training.trainer.HYPERPARAM_SPECS)",
     )
     parser.add_argument(
         "--checkpoint-every",
@@ -252,34 +252,37 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
         type=_real_in("--eta-level-coef", 0.0, 1e3),
         default=0.0,
         help="weight of the per-step coverage-level reward -log10(1 - eta + 1e-4) / 4, in "
-        "[0, 1000] (0: the env's reward only)",
+        "[0, 1000] (default 0: the env's reward only)",
     )
     parser.add_argument(
         "--intervention-coef",
         type=_real_in("--intervention-coef", 0.0, 1e3),
         default=0.0,
         help="behind --safety-filter: penalty per unit of the filter's normalised action "
-        "change, in [0, 1000]",
+        "change, in [0, 1000] (default: 0)",
     )
     parser.add_argument(
         "--blind-motion-coef",
         type=_real_in("--blind-motion-coef", 0.0, 1e3),
         default=0.0,
         help="penalty on planar speed towards directions outside the camera sector, in "
-        "[0, 1000] (teaches 'look where you drive', which the safety filter rewards)",
+        "[0, 1000] (teaches 'look where you drive', which the safety filter rewards; "
+        "default: 0)",
     )
     parser.add_argument(
         "--action-cost-coef",
         type=_real_in("--action-cost-coef", 0.0, 1e3),
         default=0.0,
-        help="penalty on the action energy (|v|^2 + w^2) / 2 (normalised), in [0, 1000]",
+        help="penalty on the action energy (|v|^2 + w^2) / 2 (normalised), in [0, 1000] "
+        "(default: 0)",
     )
     parser.add_argument(
         "--fov-keep-coef",
         type=_real_in("--fov-keep-coef", 0.0, 1e3),
         default=0.0,
         help="penalty on neighbours closer than 3 D_s outside the camera sector (exact "
-        "positions), in [0, 1000]: what the safety filter's FoV rows would correct",
+        "positions), in [0, 1000]: what the safety filter's FoV rows would correct "
+        "(default: 0)",
     )
     parser.add_argument(
         "--init-from",
