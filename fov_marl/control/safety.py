@@ -675,14 +675,21 @@ def blind_representatives(
     R = p.shape[0]
     rep = np.zeros((R, n_bins, 2))
     found = np.zeros((R, n_bins), dtype=bool)
-    rng = np.hypot(p[..., 0], p[..., 1])
-    rows, cols = np.nonzero((rng < r_cut) & (w > 0.0))
+    # the particles with hypot(x, y) < r_cut, in row-major order: a cheap superset by the
+    # squared range first (its rounding is far inside the 1e-9 margin), then hypot on
+    # that superset only (the same particles and ranges as hypot over all of them)
+    x, y = p[..., 0], p[..., 1]
+    d2 = x * x
+    d2 += y * y
+    rows, cols = np.nonzero((d2 < (r_cut * r_cut) * (1.0 + 1e-9)) & (w > 0.0))
+    rr = np.hypot(x[rows, cols], y[rows, cols])
+    near = rr < r_cut
+    rows, cols, rr = rows[near], cols[near], rr[near]
     if rows.size == 0:
         return rep, found
     ang = np.arctan2(p[rows, cols, 1], p[rows, cols, 0])
     k = np.minimum((ang + math.pi) * (n_bins / (2.0 * math.pi)), n_bins - 1).astype(np.int64)
     g = rows * n_bins + k  # group = (robot, sector)
-    rr = rng[rows, cols]
     order = np.lexsort((rr, g))
     g, rows, cols, m = g[order], rows[order], cols[order], w[rows[order], cols[order]]
     cum = np.cumsum(m)

@@ -117,7 +117,7 @@ def _blind_reference(p, mass, K, risk, r_cut):
         for k in range(K):
             cand = []
             for q, m in zip(p[i], mass[i], strict=True):
-                r = math.hypot(*q)
+                r = float(np.hypot(q[0], q[1]))  # the kernel's range test
                 if m <= 0 or r >= r_cut:
                     continue
                 b = min(int((math.atan2(q[1], q[0]) + math.pi) * K / (2 * math.pi)), K - 1)
@@ -145,6 +145,25 @@ def test_blind_representatives_match_the_reference(seed, K, risk):
     rep_r, found_r = _blind_reference(p, mass, K, risk, 8.0)
     np.testing.assert_array_equal(found, found_r)
     np.testing.assert_allclose(rep, rep_r)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000), st.floats(0.5, 20.0))
+def test_blind_representatives_take_exactly_the_particles_inside_r_cut(seed, r_cut):
+    """The range test is hypot(x, y) < r_cut, as with hypot over every particle: the
+    squared-range prefilter that skips most of them loses no particle at the boundary
+    (particles 0-2 ulp either side of r_cut, many bearings)."""
+    rng = np.random.default_rng(seed)
+    R, P = 2, 200
+    th = rng.uniform(-math.pi, math.pi, (R, P))
+    r = r_cut * (1.0 + rng.integers(-2, 3, (R, P)) * np.finfo(float).eps)
+    r[:, ::3] = rng.uniform(0.0, 2.0 * r_cut, (R, (P + 2) // 3))
+    p = np.stack([r * np.cos(th), r * np.sin(th)], -1)
+    mass = np.full((R, P), 1 / P)
+    rep, found = blind_representatives(p, mass, 16, 0.0, r_cut)
+    rep_r, found_r = _blind_reference(p, mass, 16, 0.0, r_cut)
+    np.testing.assert_array_equal(found, found_r)
+    np.testing.assert_array_equal(rep, rep_r)
 
 
 def _offsets_reference(p, counts, n, risk):
