@@ -9,24 +9,13 @@ from __future__ import annotations
 import os
 
 import pytest
+from test_cli import _error_line  # one exit-2, one-line check for every CLI test
 
 import fov_marl.bench
 import fov_marl.control.benchmark
 import fov_marl.estimation.benchmark
 import fov_marl.evaluation
 from fov_marl.cli import MAX_RENDER_FRAMES, main
-
-
-def _error_line(argv, capsys) -> str:
-    """Run ``main(argv)``; it must exit 2 with one error line and no traceback."""
-    try:
-        code = main(argv)
-    except SystemExit as exc:  # argparse
-        code = exc.code
-    assert code == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-    return err
 
 
 @pytest.fixture

@@ -261,12 +261,14 @@ class BatchedFovCbfController:
         return level
 
     def _safety(self, safety, p_body, v_est):
-        """Normalised collision rows ``(A (R,K,3), b (R,K), kind (R,K), keep (R,K))``."""
+        """Normalised collision rows ``(A (R,K,3), b (R,K), kind (R,K), keep (R,K))`` and
+        ``(R,)`` the robots given an invalid row (non-finite coefficients, b NaN or −inf:
+        the invalid-input fallback; b = +inf is a row that never binds)."""
         p, cfg = self.params, self.config
         R, M = p_body.shape[:2]
-        self._bad_safety = np.zeros(R, dtype=bool)
         if p.safety_model != "ellipse" or (safety is None and M == 0):
-            return np.zeros((R, 0, 3)), np.zeros((R, 0)), np.zeros((R, 0), np.int8), None
+            no_rows = np.zeros((R, 0, 3)), np.zeros((R, 0)), np.zeros((R, 0), np.int8), None
+            return *no_rows, np.zeros(R, dtype=bool)
         if safety is None:
             safety = team_safety_rows(
                 cfg,
@@ -277,10 +279,7 @@ class BatchedFovCbfController:
                 velocity_est_body=v_est,
                 blind=False,
             )
-        if isinstance(safety, SafetyRows):
-            A, b, kind = safety.A, safety.b, safety.kind
-        else:
-            A, b, kind = safety_triple(safety)
+        A, b, kind = safety_triple(safety)
         A = np.asarray(A, dtype=np.float64)
         b = np.asarray(b, dtype=np.float64)
         kind = np.asarray(kind)
@@ -291,12 +290,10 @@ class BatchedFovCbfController:
             )
         if kind.shape != b.shape:
             raise ValueError(f"safety kind must have shape {b.shape}, got {kind.shape}")
-        # a row with non-finite coefficients, b NaN or b = -inf is invalid input: the
-        # robot gets the invalid-input fallback (b = +inf is a row that never binds)
-        self._bad_safety = ((kind >= 0) & invalid_rows(A, b)).any(axis=1)
+        bad = ((kind >= 0) & invalid_rows(A, b)).any(axis=1)
         At, bt, _ = normalise_rows(A, b, cfg.v_max_mps, cfg.omega_max_radps, p.row_clip)
         keep = (kind >= 0) & (bt < 1.0 if p.prune else np.isfinite(b))
-        return At, bt, kind, keep
+        return At, bt, kind, keep, bad
 
     def _rows(self, p_body, v_est, d, u_star, detected):
         """cbf_rows over all robots: ``(A (R,M,4,3), b (R,M,4), h (R,M,4))``.
@@ -434,7 +431,7 @@ class BatchedFovCbfController:
         A, b, _h = self._rows(p_body, v_est_body, d, us, detected)
         At, bt, _ = normalise_rows(A, b, cfg.v_max_mps, cfg.omega_max_radps, p.row_clip)
         active = bt < 1.0 if p.prune else np.isfinite(_h)
-        sA, sb, sk, skeep = self._safety(safety, p_body, v_est_body)
+        sA, sb, sk, skeep, bad_rows = self._safety(safety, p_body, v_est_body)
         if skeep is None:
             skeep = np.zeros(sb.shape, dtype=bool)
         if not finite.all() and sb.shape[1]:
@@ -553,7 +550,7 @@ class BatchedFovCbfController:
         intervened[unc] = False
         safety_v = np.maximum(kappa[..., SAFETY_ROW].max(axis=1, initial=0.0), safety_kappa)
         # invalid inputs
-        bad = ~finite | self._bad_safety
+        bad = ~finite | bad_rows
         if bad.any():
             res_u[bad] = 0.0
             status[bad] = _INV
@@ -686,7 +683,7 @@ class BatchedFovCbfController:
         while len(self._loop) < R:
             self._loop.append(FovCbfController(self.config, self.params))
         if safety is not None and not isinstance(safety, SafetyRows):
-            A, b, kind = (np.asarray(x) for x in safety)
+            A, b, kind = safety_triple(safety)
             safety = SafetyRows(A, b, kind, np.zeros(b.shape))
         out = []
         for i in range(R):

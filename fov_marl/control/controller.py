@@ -439,7 +439,8 @@ class FovCbfController:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Normalised, pruned collision rows ``(Ã (K, 3), b̃ (K,), kind (K,))`` (maybe K = 0).
 
-        Without ``safety`` rows (a controller used on its own) the neighbour rows of
+        ``safety``: the rows as :meth:`_parse_safety` returns them, or None. Without
+        them (a controller used on its own) the neighbour rows of
         :func:`~fov_marl.control.safety.safety_rows` are built from ``p_body`` taken as
         exact positions (σ = 0), so collision avoidance never silently disappears.
         """
@@ -456,8 +457,8 @@ class FovCbfController:
                 velocity_est_body=v_est_body[None],
                 blind=False,
             )
-            safety = rows.robot(0)
-        A, b, kind = self._parse_safety(safety)
+            safety = self._parse_safety(rows.robot(0))
+        A, b, kind = safety
         At, bt, _ = normalise_rows(A, b, cfg.v_max_mps, cfg.omega_max_radps, p.row_clip)
         keep = bt < 1.0 if p.prune else np.isfinite(b)
         return At[keep], bt[keep], kind[keep]
@@ -743,7 +744,8 @@ class FovCbfController:
                 raise ValueError(f"{name} must have shape ({M},) or be None, got {np.shape(value)}")
         # a collision row with non-finite coefficients, b NaN or b = -inf is invalid
         # input (b = +inf: a row that never binds); before, such rows were dropped
-        bad_rows = safety is not None and bool(invalid_rows(*self._parse_safety(safety)[:2]).any())
+        rows_given = None if safety is None else self._parse_safety(safety)
+        bad_rows = rows_given is not None and bool(invalid_rows(*rows_given[:2]).any())
         self.stats["steps"] += 1
         kappa = np.zeros((M, 4))
         if bad_rows or not (
@@ -772,7 +774,7 @@ class FovCbfController:
         rows = cbf_rows(p_body, v_est_body, d, cfg, p, self.h_max, u_star[:2], detected)
         At, bt, _ = normalise_rows(rows.A, rows.b, cfg.v_max_mps, cfg.omega_max_radps, p.row_clip)
         active = bt < 1.0 if p.prune else np.isfinite(rows.h)
-        sA, sb, sk = self._safety_rows(safety, p_body, v_est_body)
+        sA, sb, sk = self._safety_rows(rows_given, p_body, v_est_body)
         if p.safety_model == "ellipse":
             active[:, SAFETY_ROW] = False
         if glance:

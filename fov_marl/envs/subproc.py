@@ -89,6 +89,7 @@ from fov_marl.envs.vector import (
     check_num_envs,
     check_vector_actions,
     vector_seeds,
+    warn_no_render,
 )
 from fov_marl.validation import check_int, describe
 
@@ -585,7 +586,7 @@ class SubprocVectorEnv:
 
     def render(self) -> None:
         """Draws nothing (``render_mode`` None), like :meth:`FovVectorEnv.render`."""
-        FovVectorEnv.render(self)  # type: ignore[arg-type]
+        warn_no_render()
 
     # --------------------------------------------------------------- close
     def close(self) -> None:

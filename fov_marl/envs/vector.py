@@ -69,7 +69,13 @@ from fov_marl.envs.base import MAX_CYCLES, scenario_config
 from fov_marl.envs.core import CORES, BatchedCore
 from fov_marl.validation import check_seed, describe, holds_bool
 
-__all__ = ["FovVectorEnv", "check_num_envs", "check_vector_actions", "vector_seeds"]
+__all__ = [
+    "FovVectorEnv",
+    "check_num_envs",
+    "check_vector_actions",
+    "vector_seeds",
+    "warn_no_render",
+]
 
 
 def check_num_envs(num_envs: Any) -> int:
@@ -130,6 +136,15 @@ def check_vector_actions(actions: Any, num_envs: int, n_agents: int) -> np.ndarr
             f"(copy {k}, robot_{i})"
         )
     return a
+
+
+def warn_no_render() -> None:
+    """The ``render()`` of the vector envs: they draw nothing (``render_mode`` None), so
+    warn as Gymnasium's envs do without a render mode (the caller returns None)."""
+    gymnasium.logger.warn(
+        "a vector env does not render (render_mode is None); use "
+        "parallel_env(render_mode='rgb_array') or `fov-marl render` for frames"
+    )
 
 
 class FovVectorEnv:
@@ -324,10 +339,7 @@ class FovVectorEnv:
         """The vector env draws nothing (``render_mode`` None): warns, as Gymnasium's
         envs do without a render mode, and returns None. Frames come from
         ``parallel_env(render_mode="rgb_array")`` or ``fov-marl render``."""
-        gymnasium.logger.warn(
-            "a vector env does not render (render_mode is None); use "
-            "parallel_env(render_mode='rgb_array') or `fov-marl render` for frames"
-        )
+        warn_no_render()
 
     def close(self) -> None:
         """Nothing to release (no rendering); kept for the vector-env protocol."""
