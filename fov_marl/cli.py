@@ -41,14 +41,11 @@ from fov_marl.filter_options import add_filter_arguments, filter_kwargs
 from fov_marl.jsonio import json_text, write_json
 from fov_marl.tables import format_records, format_table
 from fov_marl.validation import MAX_SEED, check_out_dir, check_out_file, check_writable
+from fov_marl.video import MAX_RENDER_FRAMES
 
 __all__ = ["main", "build_parser", "format_table", "CliError"]
 
 _PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__))
-
-#: render keeps its frames in memory (640 x 640 x 3 bytes each): at most this many (the
-#: initial state and the 1000 steps of the default episode at ``--every 1``)
-MAX_RENDER_FRAMES = 1001
 
 
 class _Parser(argparse.ArgumentParser):
@@ -137,6 +134,14 @@ EVAL_COLUMNS_BY_SCENARIO = {
 
 #: CLI flags that set scenario config fields
 _CONFIG_FLAGS = {"n_agents": "--n-agents", "fov_deg": "--fov-deg", "max_cycles": "--max-cycles"}
+
+
+def _shown(value: Any) -> Any:
+    """An episode-table cell: a non-finite number (``min_distance`` of a one-robot team:
+    no pair) shows as ``-``, as the summary leaves it out."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
 def _is_model(policy: str) -> bool:
@@ -324,7 +329,7 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
         "fov_marl_version": _version(),
     }
     columns = EVAL_COLUMNS_BY_SCENARIO[args.scenario]
-    print(format_table([[getattr(r, c) for c in columns] for r in records], columns))
+    print(format_table([[_shown(getattr(r, c)) for c in columns] for r in records], columns))
     srows = []
     for f in columns[2:]:
         s = summary.get(f)
@@ -359,12 +364,12 @@ def run_render(args: argparse.Namespace) -> Path:
     sf_kwargs = _filter_kwargs(args, loaded)
     steps = cfg.max_cycles
     frames = frame_count(steps, args.every)  # t = 0, every k-th step, the final state
-    if frames > MAX_RENDER_FRAMES:  # render_episode keeps them all, even for a .png
+    if frames > MAX_RENDER_FRAMES and out.suffix.lower() != ".png":  # a .png keeps one
         raise CliError(
             f"--every {args.every}: an episode of {steps} steps keeps {frames} frames in "
             f"memory (640 x 640 RGB each: the start, every {args.every}-th step and the "
             f"end); at most {MAX_RENDER_FRAMES}: raise --every to "
-            f"{-(-steps // (MAX_RENDER_FRAMES - 1))} or lower --max-cycles"
+            f"{-(-steps // (MAX_RENDER_FRAMES - 1))}, lower --max-cycles or write a .png"
         )
     # the last check: a trial write (a virtual or read-only file system, /proc, /sys),
     # so the episode never ends in a write error
@@ -624,7 +629,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=_positive_int("--every"),
         default=5,
         help="draw the state every k steps: the frames are t = 0, every k-th step and "
-        f"always the final state (at most {MAX_RENDER_FRAMES} frames are kept in memory)",
+        f"always the final state (a .gif/.mp4 keeps at most {MAX_RENDER_FRAMES} frames in "
+        "memory; a .png draws only the final state)",
     )
     d.add_argument(
         "--fps", type=_positive_int("--fps", 100), default=10, help="frames per second, [1, 100]"

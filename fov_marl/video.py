@@ -45,6 +45,7 @@ __all__ = [
     "frame_count",
     "VIDEO_SUFFIXES",
     "MAX_FPS",
+    "MAX_RENDER_FRAMES",
 ]
 
 VIDEO_SUFFIXES = (".gif", ".mp4", ".png")
@@ -52,6 +53,10 @@ VIDEO_EXTRA_HINT = "pip install 'fov_marl[video]'"
 #: the largest frame rate (frames per second) of a GIF/MP4: a GIF stores each frame's
 #: duration in 10 ms units, so 100 fps is its finest
 MAX_FPS = 100
+#: the most frames :func:`render_episode` keeps in memory for a GIF/MP4 (640 x 640 RGB,
+#: 1.2 MB each: about 1.2 GB at the cap), i.e. the default 1000-step episode at
+#: ``every=1``; a PNG keeps only the frame it writes
+MAX_RENDER_FRAMES = 1001
 
 
 def frame_count(steps: int, every: int) -> int:
@@ -192,6 +197,18 @@ def save_frames(frames: Sequence[np.ndarray], out: str | os.PathLike, fps: int =
     return out
 
 
+def _check_frame_budget(steps: int, every: int) -> None:
+    """A GIF/MP4 of ``steps`` steps at ``every`` keeps at most :data:`MAX_RENDER_FRAMES`."""
+    n = frame_count(steps, every)
+    if n > MAX_RENDER_FRAMES:
+        raise ConfigError(
+            f"every={every}: an episode of {steps} steps gives {n} frames, kept in memory "
+            f"(640 x 640 RGB each: the start, every {every}-th step and the end); at most "
+            f"{MAX_RENDER_FRAMES}: raise every to {-(-steps // (MAX_RENDER_FRAMES - 1))} or "
+            "lower max_cycles, or write a .png (the final state only)"
+        )
+
+
 def _check_policy(policy: Any) -> str:
     """``policy``: a registered policy name, a trained model (``.zip`` or run folder) or
     an exported set-policy folder."""
@@ -269,9 +286,10 @@ def render_episode(
     """Run one episode and save its frames to ``out`` (.gif/.mp4/.png).
 
     The frames are the initial state (t = 0 s), the state after every ``every``-th step
-    and the final state, always, once, as the last frame (:func:`frame_count`): a .png
-    shows the final state. Every argument is checked (a ``ValueError`` naming it and its
-    range) before the episode runs.
+    and the final state, always, once, as the last frame (:func:`frame_count`), at most
+    :data:`MAX_RENDER_FRAMES` of them (they are kept in memory until the episode ends); a
+    .png draws and keeps only the final state, at any length. Every argument is checked
+    (a ``ValueError`` naming it and its range) before the episode runs.
 
     Args:
         scenario: ``"coverage"`` or ``"crossing"``.
@@ -284,7 +302,9 @@ def render_episode(
         out: output file ending in .gif, .mp4 or .png; its writer is checked and a trial
             write made before the episode runs (its folder is created).
         safety_filter: run behind :class:`~fov_marl.wrappers.SafetyFilterWrapper`.
-        every: draw the state every ``every`` steps, an integer >= 1 (1: every step).
+        every: draw the state every ``every`` steps, an integer >= 1 (1: every step);
+            for a .gif/.mp4, ``frame_count(max_cycles, every)`` must be at most
+            :data:`MAX_RENDER_FRAMES` (ignored for a .png).
         fps: frames per second of the GIF/MP4, an integer in [1, 100].
         beliefs_of: whose particle filters to draw (``"robot_k"``, one of the env's
             agent names, ``"all"``, ``"none"``, or a list of robot indices in
@@ -338,6 +358,9 @@ def render_episode(
     safety_filter_kwargs = _check_filter_kwargs(safety_filter_kwargs, safety_filter)
     cfg = scenario_config(scenario, "render_episode", env_kwargs)  # the env's own check
     chosen = _check_beliefs_of(beliefs_of, cfg.n_agents)
+    final_only = path.suffix.lower() == ".png"
+    if not final_only:
+        _check_frame_budget(cfg.max_cycles, every)
     # a trial write (a virtual or read-only file system, a folder in the way): the
     # episode never ends in a write error
     check_writable("out", [path])
@@ -347,6 +370,8 @@ def render_episode(
     def draw(env: Any) -> None:
         base = env.unwrapped
         state["drawn"] = base.num_steps
+        if final_only:
+            frames.clear()  # a .png keeps one frame, whatever the episode's length
         frames.append(
             render_frame(
                 base.config,
@@ -379,8 +404,9 @@ def render_episode(
 
     def on_step(env: Any, infos: dict) -> None:
         k = env.unwrapped.num_steps
-        # the last step (truncation or termination) is always drawn, once
-        if k % every == 0 or not env.agents:
+        # the last step (truncation or termination) is always drawn, once; a .png
+        # draws only that one
+        if (k % every == 0 and not final_only) or not env.agents:
             if state["drawn"] != k:
                 draw(env)
 

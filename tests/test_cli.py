@@ -653,3 +653,16 @@ def test_train_says_how_checkpoint_every_is_rounded(tmp_path, capsys, monkeypatc
     assert main([*argv, "--n-agents", "2", "--checkpoint-every", "5"]) is not None
     out = capsys.readouterr().out
     assert "--checkpoint-every 5 saves every 4 timesteps" in out
+
+
+def test_evaluate_one_robot_team_table_shows_no_infinite_distance(capsys):
+    """A one-robot team has no pair: its min_distance is inf in the record, "-" in the
+    episode table (the summary leaves it out), never "inf"."""
+    args = _eval_args("unused")[:-2]  # no --out
+    args[args.index("--n-agents") + 1] = "1"
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    assert "inf" not in printed
+    header, _rule, *rows = printed.split("\n\n")[0].splitlines()
+    col = header.split().index("min_distance")
+    assert len(rows) == 2 and all(r.split()[col] == "-" for r in rows)

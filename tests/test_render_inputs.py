@@ -160,13 +160,51 @@ def test_frames_are_the_start_every_kth_step_and_the_final_state(
 
 
 def test_the_png_is_the_final_state(titles, tmp_path):
-    """F7: 'a PNG of the last frame' showed t = 1.2 s of a 2.0 s episode."""
+    """F7: 'a PNG of the last frame' showed t = 1.2 s of a 2.0 s episode. A PNG draws
+    only the start (at reset) and the final state: it keeps one frame."""
     from PIL import Image
 
     out = render_episode("crossing", "pfcbf", 0, tmp_path / "e.png", every=4, **TINY)
-    assert _times(titles) == ["t = 0.0 s", "t = 0.8 s", "t = 1.6 s", "t = 2.0 s"]
+    assert _times(titles) == ["t = 0.0 s", "t = 2.0 s"]
     png = np.asarray(Image.open(out).convert("RGB"))
     np.testing.assert_array_equal(png, titles[-1][1])
+
+
+def test_a_png_has_no_frame_cap(titles, tmp_path):
+    """A PNG keeps one frame, so an episode longer than the GIF/MP4 frame cap renders at
+    every=1 (the cap was the CLI's only, and counted a PNG's frames as a GIF's)."""
+    from fov_marl.video import MAX_RENDER_FRAMES
+
+    steps = MAX_RENDER_FRAMES + 4
+    render_episode(
+        "coverage", "random", 0, tmp_path / "e.png", every=1, n_agents=2, max_cycles=steps
+    )
+    assert _times(titles) == ["t = 0.0 s", f"t = {steps * 0.2:.1f} s"]
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".mp4"])
+def test_an_animation_over_the_frame_cap_is_refused_before_the_episode(
+    suffix, tmp_path, no_episode
+):
+    """render_episode kept every frame of any episode (1.2 MB each): the cap was only the
+    CLI's. 1000 steps at every=1 keep 1001 frames (the cap); 1001 steps keep 1002."""
+    from fov_marl.video import MAX_RENDER_FRAMES
+
+    assert MAX_RENDER_FRAMES == frame_count(1000, 1) == 1001
+    if suffix == ".mp4":
+        pytest.importorskip("imageio_ffmpeg")
+    with pytest.raises(
+        ValueError,
+        match=r"every=1: an episode of 1001 steps gives 1002 "
+        r"frames, .* raise every to 2 or lower max_cycles, or write a \.png",
+    ):
+        render_episode(
+            "coverage", "random", 0, tmp_path / f"e{suffix}", every=1, n_agents=2, max_cycles=1001
+        )
+    with pytest.raises(AssertionError, match="the episode ran"):  # at the cap: it starts
+        render_episode(
+            "coverage", "random", 0, tmp_path / f"e{suffix}", every=1, n_agents=2, max_cycles=1000
+        )
 
 
 def test_frames_behind_the_safety_filter(titles, tmp_path):

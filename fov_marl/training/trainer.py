@@ -135,6 +135,7 @@ from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
 from fov_marl.infos import metrics_of, safety_of
 from fov_marl.training.vec_env import ParallelEnvVecEnv
 from fov_marl.validation import (
+    MAX_SEED,
     ConfigError,
     check_bool,
     check_budget,
@@ -425,7 +426,6 @@ class FovMetricsCallback(BaseCallback):
 #: Resource guard: SB3's rollout (PPO) or replay (SAC) buffer may take at most this
 #: many bytes (float32 observations, actions and per-sample scalars).
 MAX_BUFFER_BYTES = 4 * 2**30
-MAX_SEED = 2**31 - 1
 
 #: Accepted ``hyperparams`` keys per algorithm: key -> (kind, lo, hi). Kinds: "int",
 #: "real", "real+" (lo open), "bool", "real|None", "policy_kwargs", "train_freq",
