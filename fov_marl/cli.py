@@ -364,12 +364,13 @@ def run_render(args: argparse.Namespace) -> Path:
     sf_kwargs = _filter_kwargs(args, loaded)
     steps = cfg.max_cycles
     frames = frame_count(steps, args.every)  # t = 0, every k-th step, the final state
-    if frames > MAX_RENDER_FRAMES and out.suffix.lower() != ".png":  # a .png keeps one
+    if frames > MAX_RENDER_FRAMES and out.suffix.lower() == ".gif":  # kept in memory
         raise CliError(
             f"--every {args.every}: an episode of {steps} steps keeps {frames} frames in "
             f"memory (640 x 640 RGB each: the start, every {args.every}-th step and the "
             f"end); at most {MAX_RENDER_FRAMES}: raise --every to "
-            f"{-(-steps // (MAX_RENDER_FRAMES - 1))}, lower --max-cycles or write a .png"
+            f"{-(-steps // (MAX_RENDER_FRAMES - 1))}, lower --max-cycles or write a .mp4 "
+            "(streamed) or a .png (the final state)"
         )
     # the last check: a trial write (a virtual or read-only file system, /proc, /sys),
     # so the episode never ends in a write error
@@ -629,8 +630,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=_positive_int("--every"),
         default=5,
         help="draw the state every k steps: the frames are t = 0, every k-th step and "
-        f"always the final state (a .gif/.mp4 keeps at most {MAX_RENDER_FRAMES} frames in "
-        "memory; a .png draws only the final state)",
+        f"always the final state (a .gif keeps at most {MAX_RENDER_FRAMES} frames in memory; "
+        "a .mp4 is streamed; a .png draws only the final state)",
     )
     d.add_argument(
         "--fps", type=_positive_int("--fps", 100), default=10, help="frames per second, [1, 100]"

@@ -53,9 +53,10 @@ VIDEO_EXTRA_HINT = "pip install 'fov_marl[video]'"
 #: the largest frame rate (frames per second) of a GIF/MP4: a GIF stores each frame's
 #: duration in 10 ms units, so 100 fps is its finest
 MAX_FPS = 100
-#: the most frames :func:`render_episode` keeps in memory for a GIF/MP4 (640 x 640 RGB,
+#: the most frames :func:`render_episode` keeps in memory for a GIF (640 x 640 RGB,
 #: 1.2 MB each: about 1.2 GB at the cap), i.e. the default 1000-step episode at
-#: ``every=1``; a PNG keeps only the frame it writes
+#: ``every=1``; an MP4 is written frame by frame and a PNG keeps only its one frame, so
+#: neither has a cap
 MAX_RENDER_FRAMES = 1001
 
 
@@ -198,14 +199,14 @@ def save_frames(frames: Sequence[np.ndarray], out: str | os.PathLike, fps: int =
 
 
 def _check_frame_budget(steps: int, every: int) -> None:
-    """A GIF/MP4 of ``steps`` steps at ``every`` keeps at most :data:`MAX_RENDER_FRAMES`."""
+    """A GIF of ``steps`` steps at ``every`` keeps at most :data:`MAX_RENDER_FRAMES`."""
     n = frame_count(steps, every)
     if n > MAX_RENDER_FRAMES:
         raise ConfigError(
             f"every={every}: an episode of {steps} steps gives {n} frames, kept in memory "
             f"(640 x 640 RGB each: the start, every {every}-th step and the end); at most "
             f"{MAX_RENDER_FRAMES}: raise every to {-(-steps // (MAX_RENDER_FRAMES - 1))} or "
-            "lower max_cycles, or write a .png (the final state only)"
+            "lower max_cycles, or write a .mp4 (streamed) or a .png (the final state only)"
         )
 
 
@@ -286,10 +287,11 @@ def render_episode(
     """Run one episode and save its frames to ``out`` (.gif/.mp4/.png).
 
     The frames are the initial state (t = 0 s), the state after every ``every``-th step
-    and the final state, always, once, as the last frame (:func:`frame_count`), at most
-    :data:`MAX_RENDER_FRAMES` of them (they are kept in memory until the episode ends); a
-    .png draws and keeps only the final state, at any length. Every argument is checked
-    (a ``ValueError`` naming it and its range) before the episode runs.
+    and the final state, always, once, as the last frame (:func:`frame_count`). A .gif
+    keeps them in memory until the episode ends, at most :data:`MAX_RENDER_FRAMES`; a
+    .mp4 is written frame by frame (an episode that raises leaves no file); a .png
+    draws and keeps only the final state. Every argument is checked (a ``ValueError``
+    naming it and its range) before the episode runs.
 
     Args:
         scenario: ``"coverage"`` or ``"crossing"``.
@@ -303,8 +305,8 @@ def render_episode(
             write made before the episode runs (its folder is created).
         safety_filter: run behind :class:`~fov_marl.wrappers.SafetyFilterWrapper`.
         every: draw the state every ``every`` steps, an integer >= 1 (1: every step);
-            for a .gif/.mp4, ``frame_count(max_cycles, every)`` must be at most
-            :data:`MAX_RENDER_FRAMES` (ignored for a .png).
+            for a .gif, ``frame_count(max_cycles, every)`` must be at most
+            :data:`MAX_RENDER_FRAMES`.
         fps: frames per second of the GIF/MP4, an integer in [1, 100].
         beliefs_of: whose particle filters to draw (``"robot_k"``, one of the env's
             agent names, ``"all"``, ``"none"``, or a list of robot indices in
@@ -358,13 +360,16 @@ def render_episode(
     safety_filter_kwargs = _check_filter_kwargs(safety_filter_kwargs, safety_filter)
     cfg = scenario_config(scenario, "render_episode", env_kwargs)  # the env's own check
     chosen = _check_beliefs_of(beliefs_of, cfg.n_agents)
-    final_only = path.suffix.lower() == ".png"
-    if not final_only:
+    suffix = path.suffix.lower()
+    final_only = suffix == ".png"  # one frame kept
+    streamed = suffix == ".mp4"  # each frame written as it is drawn
+    if suffix == ".gif":  # Pillow writes a GIF from all its frames at once
         _check_frame_budget(cfg.max_cycles, every)
     # a trial write (a virtual or read-only file system, a folder in the way): the
     # episode never ends in a write error
     check_writable("out", [path])
     frames: list[np.ndarray] = []
+    writer: Any = None  # the .mp4's, opened just before the episode
     state: dict[str, Any] = {"layers": [], "beliefs": False, "drawn": -1}
 
     def draw(env: Any) -> None:
@@ -372,17 +377,19 @@ def render_episode(
         state["drawn"] = base.num_steps
         if final_only:
             frames.clear()  # a .png keeps one frame, whatever the episode's length
-        frames.append(
-            render_frame(
-                base.config,
-                base.poses,
-                base.targets,
-                state["layers"],
-                title=frame_title(base.config, base.num_steps * base.config.dt_s, label),
-                legend=legend,
-                beliefs=state["beliefs"],
-            )
+        frame = render_frame(
+            base.config,
+            base.poses,
+            base.targets,
+            state["layers"],
+            title=frame_title(base.config, base.num_steps * base.config.dt_s, label),
+            legend=legend,
+            beliefs=state["beliefs"],
         )
+        if writer is not None:
+            writer.append_data(frame)
+        else:
+            frames.append(frame)
 
     def factory(env: Any) -> Any:
         pol = factory_base(env)
@@ -411,13 +418,26 @@ def render_episode(
                 draw(env)
 
     factory.__name__ = label
-    run_episode(
-        scenario,
-        factory,
-        seed,
-        safety_filter=safety_filter,
-        on_step=on_step,
-        safety_filter_kwargs=safety_filter_kwargs,
-        **env_kwargs,
-    )
+    if streamed:  # writer checked above; imageio's defaults, as save_frames
+        import imageio.v2 as imageio
+
+        writer = imageio.get_writer(path, fps=fps)
+    try:
+        run_episode(
+            scenario,
+            factory,
+            seed,
+            safety_filter=safety_filter,
+            on_step=on_step,
+            safety_filter_kwargs=safety_filter_kwargs,
+            **env_kwargs,
+        )
+    except BaseException:
+        if writer is not None:  # no partial video left behind
+            writer.close()
+            path.unlink(missing_ok=True)
+        raise
+    if writer is not None:
+        writer.close()
+        return path
     return save_frames(frames, path, fps=fps)

@@ -58,8 +58,9 @@ def test_render_frame_cap_counts_the_start_and_the_end(tmp_path, capsys, no_epis
     assert "raise --every to 2" in err
     with pytest.raises(AssertionError, match="the episode ran"):  # accepted: it starts
         main([*base, "--max-cycles", "1000", "--out", str(tmp_path / "e.gif")])
-    with pytest.raises(AssertionError, match="the episode ran"):  # a .png keeps one frame
-        main([*base, "--max-cycles", "5000", "--out", str(tmp_path / "e.png")])
+    for suffix in (".png", ".mp4"):  # one frame kept; streamed
+        with pytest.raises(AssertionError, match="the episode ran"):
+            main([*base, "--max-cycles", "5000", "--out", str(tmp_path / f"e{suffix}")])
 
 
 def test_render_gif_has_the_start_and_the_final_state(tmp_path):

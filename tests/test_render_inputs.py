@@ -182,29 +182,63 @@ def test_a_png_has_no_frame_cap(titles, tmp_path):
     assert _times(titles) == ["t = 0.0 s", f"t = {steps * 0.2:.1f} s"]
 
 
-@pytest.mark.parametrize("suffix", [".gif", ".mp4"])
-def test_an_animation_over_the_frame_cap_is_refused_before_the_episode(
-    suffix, tmp_path, no_episode
-):
+def test_a_gif_over_the_frame_cap_is_refused_before_the_episode(tmp_path, no_episode):
     """render_episode kept every frame of any episode (1.2 MB each): the cap was only the
     CLI's. 1000 steps at every=1 keep 1001 frames (the cap); 1001 steps keep 1002."""
     from fov_marl.video import MAX_RENDER_FRAMES
 
     assert MAX_RENDER_FRAMES == frame_count(1000, 1) == 1001
-    if suffix == ".mp4":
-        pytest.importorskip("imageio_ffmpeg")
     with pytest.raises(
         ValueError,
-        match=r"every=1: an episode of 1001 steps gives 1002 "
-        r"frames, .* raise every to 2 or lower max_cycles, or write a \.png",
+        match=r"every=1: an episode of 1001 steps gives 1002 frames, .* raise every to 2 or "
+        r"lower max_cycles, or write a \.mp4 \(streamed\) or a \.png",
     ):
         render_episode(
-            "coverage", "random", 0, tmp_path / f"e{suffix}", every=1, n_agents=2, max_cycles=1001
+            "coverage", "random", 0, tmp_path / "e.gif", every=1, n_agents=2, max_cycles=1001
         )
     with pytest.raises(AssertionError, match="the episode ran"):  # at the cap: it starts
         render_episode(
-            "coverage", "random", 0, tmp_path / f"e{suffix}", every=1, n_agents=2, max_cycles=1000
+            "coverage", "random", 0, tmp_path / "e.gif", every=1, n_agents=2, max_cycles=1000
         )
+
+
+def test_an_mp4_is_streamed_past_the_frame_cap(titles, tmp_path, monkeypatch):
+    """An .mp4 is written frame by frame: no cap, and every frame drawn is in the file
+    (a cap of 3 frames here, an episode of 9 frames)."""
+    pytest.importorskip("imageio_ffmpeg")
+    import imageio.v2 as imageio
+
+    import fov_marl.video
+
+    monkeypatch.setattr(fov_marl.video, "MAX_RENDER_FRAMES", 3)
+    with pytest.raises(ValueError, match="gives 9 frames"):  # the cap is the GIF's
+        render_episode(
+            "coverage", "random", 0, tmp_path / "e.gif", every=1, **{**TINY, "max_cycles": 8}
+        )
+    out = render_episode(
+        "coverage", "random", 0, tmp_path / "e.mp4", every=1, **{**TINY, "max_cycles": 8}
+    )
+    assert len(titles) == 9
+    with imageio.get_reader(out) as reader:
+        assert reader.count_frames() == 9
+
+
+def test_an_mp4_episode_that_fails_leaves_no_file(tmp_path, monkeypatch):
+    pytest.importorskip("imageio_ffmpeg")
+    real = fov_marl.envs.rendering.render_frame
+    calls = []
+
+    def fail_on_third(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise RuntimeError("boom")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(fov_marl.envs.rendering, "render_frame", fail_on_third)
+    out = tmp_path / "e.mp4"
+    with pytest.raises(RuntimeError, match="boom"):
+        render_episode("coverage", "random", 0, out, every=1, **TINY)
+    assert not out.exists() and not list(tmp_path.iterdir())
 
 
 def test_frames_behind_the_safety_filter(titles, tmp_path):
