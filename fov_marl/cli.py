@@ -37,7 +37,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from fov_marl.filter_options import add_filter_arguments, filter_kwargs
+from fov_marl.filter_options import add_filter_arguments, check_filter_config, filter_kwargs
 from fov_marl.jsonio import json_text, write_json
 from fov_marl.tables import format_records, format_table
 from fov_marl.validation import MAX_SEED, check_out_dir, check_out_file, check_writable
@@ -290,9 +290,14 @@ def _filter_kwargs(args: argparse.Namespace, loaded: Any | None) -> dict[str, An
     on = bool(
         args.safety_filter or getattr(loaded, "safety_filter", False) or learned_filter(args.policy)
     )
-    return filter_kwargs(
+    out = filter_kwargs(
         args.filter_tracker, args.filter_controller, on, init=getattr(args, "filter_init", None)
     )
+    if on and getattr(args, "resolved_config", None) is not None:  # after _check_config
+        from fov_marl.config import ScenarioConfig
+
+        check_filter_config(ScenarioConfig.from_dict(args.resolved_config), out)
+    return out
 
 
 def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:

@@ -276,11 +276,11 @@ class ScenarioConfig:
         )  # fmt: skip
         check_real(
             "safety_distance_m", self.safety_distance_m, 2 * r, MAX_LENGTH_M, lo_open=True,
-            note=f"(above 2 * robot_radius_m = {2 * r})",
+            note=f"(above 2 * robot_radius_m = {2 * r}; raise it or lower robot_radius_m)",
         )  # fmt: skip
         check_real(
             "init_min_separation_m", self.init_min_separation_m, 2 * r, MAX_LENGTH_M,
-            note=f"(at least 2 * robot_radius_m = {2 * r})",
+            note=f"(at least 2 * robot_radius_m = {2 * r}; raise it or lower robot_radius_m)",
         )  # fmt: skip
 
         cov = check_real_sequence(

@@ -28,10 +28,10 @@ one-line error naming the flag.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
-__all__ = ["INITS", "add_filter_arguments", "filter_kwargs"]
+__all__ = ["INITS", "add_filter_arguments", "check_filter_config", "filter_kwargs"]
 
 _FLAGS = (
     ("--filter-tracker", "filter_tracker", "tracker_params", "TrackerParams"),
@@ -120,3 +120,13 @@ def filter_kwargs(
             raise ValueError(f"--filter-init must be one of {list(INITS)}, got {init!r}")
         out["init"] = init
     return out or None
+
+
+def check_filter_config(config: Any, sf_kwargs: Mapping[str, Any] | None) -> None:
+    """Check, before any episode, that the safety filter accepts the env of ``config``
+    (a :class:`~fov_marl.config.ScenarioConfig`) with the options ``sf_kwargs``
+    (:func:`filter_kwargs`): e.g. a camera range at or below D_s is refused
+    (:func:`~fov_marl.wrappers.safety_filter.filter_controller_params`)."""
+    from fov_marl.wrappers.safety_filter import filter_controller_params
+
+    filter_controller_params(config, (sf_kwargs or {}).get("controller_params"))

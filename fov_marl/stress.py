@@ -156,7 +156,8 @@ class StressCase:
     Raises:
         ValueError: a field of the wrong type or out of its range (naming it): the four
             ``*_kwargs`` must be mappings with string keys, ``filter_kwargs`` only the
-            filter's keywords.
+            filter's keywords; a filtered case whose env the filter refuses
+            (:func:`~fov_marl.filter_options.check_filter_config`).
     """
 
     adversary: str
@@ -208,12 +209,16 @@ class StressCase:
         from fov_marl.config import make_config
 
         # n_agents and fov_deg (and env_kwargs) validated by the scenario config
-        make_config(
+        cfg = make_config(
             scenario=self.scenario,
             n_agents=self.n_agents,
             fov_deg=self.fov_deg,
             **dict(self.env_kwargs),
         )
+        if self.filtered:  # e.g. a camera range at or below D_s
+            from fov_marl.filter_options import check_filter_config
+
+            check_filter_config(cfg, self.filter_kwargs)
         if self.start == "head_on_pair" and self.n_agents < 2:
             raise ValueError(f"start 'head_on_pair' needs n_agents >= 2, got {self.n_agents}")
 

@@ -666,3 +666,11 @@ def test_evaluate_one_robot_team_table_shows_no_infinite_distance(capsys):
     header, _rule, *rows = printed.split("\n\n")[0].splitlines()
     col = header.split().index("min_distance")
     assert len(rows) == 2 and all(r.split()[col] == "-" for r in rows)
+
+
+def test_filter_with_a_camera_short_of_ds_is_one_line(capsys):
+    err = _error_line(
+        ["evaluate", "--policy", "random", "--safety-filter", "--env", "detection_range_m=2"],
+        capsys,
+    )
+    assert "detection_range_m must be above safety_distance_m = 2 m" in err

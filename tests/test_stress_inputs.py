@@ -96,3 +96,13 @@ def test_a_one_robot_case_reports_no_inf():
     assert "min_d_m" in format_stress_table([row])
     both = run_stress([("straight", 2, 120.0)], episodes=1, steps=2)[0]["min_distance_m"]
     assert math.isfinite(both)
+
+
+def test_a_filtered_case_whose_camera_cannot_see_to_ds_is_refused():
+    """The filter refuses a camera range at or below D_s; a stress case says so when it is
+    built (before any episode), and an unfiltered case takes the range."""
+    from fov_marl.stress import StressCase
+
+    with pytest.raises(ValueError, match="detection_range_m must be above safety_distance_m"):
+        StressCase("head_on", 8, 120.0, env_kwargs={"detection_range_m": 1.0})
+    StressCase("head_on", 8, 120.0, filtered=False, env_kwargs={"detection_range_m": 1.0})

@@ -146,7 +146,7 @@ from fov_marl.estimation import TrackerParams
 from fov_marl.infos import reset_safety_infos, set_safety_infos
 from fov_marl.pipeline import PfCbfPipeline
 from fov_marl.spaces import action_to_velocity
-from fov_marl.validation import check_int, check_params, fov_parallel_base
+from fov_marl.validation import ConfigError, check_int, check_params, fov_parallel_base
 
 
 class FilteredActions(NamedTuple):
@@ -271,7 +271,26 @@ def filter_controller_defaults(config: Any, overrides: Any = None) -> dict[str, 
 def filter_controller_params(config: Any, value: Any) -> ControllerParams:
     """The filter's :class:`ControllerParams` for the env of ``config``: ``value`` (a
     dataclass, used as given; a dict of overrides; or None) on top of
-    :func:`filter_controller_defaults` (one place for both wrappers)."""
+    :func:`filter_controller_defaults` (one place for both wrappers).
+
+    Raises:
+        ValueError: ``config.detection_range_m <= config.safety_distance_m``: a camera
+            that cannot see to D_s finds a neighbour only once it is inside D_s, and the
+            filter's rows and travel budget keep D_s only for neighbours it can see there
+            (red team, N = 8, β = 120°, ``head_on``, random start, seed 46000: with a 1 m
+            range, 2 r, three collisions, min 0.843 m; with 2 m and 2.5 m none, but D_s
+            broken, min 1.910 / 1.959 m); or a bad ``value``.
+    """
+    try:
+        rng_m, ds_m = float(config.detection_range_m), float(config.safety_distance_m)
+    except (AttributeError, TypeError, ValueError):  # a bad config: make_config reports it
+        rng_m = ds_m = math.nan
+    if rng_m <= ds_m:
+        raise ConfigError(
+            f"detection_range_m must be above safety_distance_m = {ds_m:g} m behind the "
+            f"safety filter, got {rng_m:g}: the camera must see a neighbour before it is "
+            "inside D_s (raise detection_range_m or lower safety_distance_m)"
+        )
     return check_params(
         "controller_params", value, ControllerParams, filter_controller_defaults(config, value)
     )

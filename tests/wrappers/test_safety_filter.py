@@ -364,3 +364,24 @@ def test_blind_travel_budget_is_per_bearing_at_every_fov(fov_deg):
     assert forced.pipeline.controller_params.blind_travel_view_deg == 10.0
     given = ControllerParams(blind_travel_m=0.5, blind_travel_bearings=12)
     assert SafetyFilterWrapper(env, controller_params=given).pipeline.controller_params is given
+
+
+@pytest.mark.parametrize("make", ["per_copy", "vector"])
+@pytest.mark.parametrize("range_m", [1.0, 2.0])
+def test_filter_refuses_a_camera_that_cannot_see_to_ds(make, range_m):
+    """Red team (N = 8, β = 120°, head_on, random start, seed 46000): a 1 m camera range
+    (2 r) gave three collisions behind the filter, 2 m broke D_s. The filter keeps D_s only
+    for neighbours it can see there: a range at or below D_s is a ValueError naming it."""
+    from fov_marl.wrappers import VectorSafetyFilterWrapper
+
+    kw = {"n_agents": 3, "detection_range_m": range_m}
+    msg = rf"detection_range_m must be above safety_distance_m = 2 m .* got {range_m:g}"
+    with pytest.raises(ValueError, match=msg):
+        if make == "per_copy":
+            SafetyFilterWrapper(fov_coverage_v0.parallel_env(**kw))
+        else:
+            VectorSafetyFilterWrapper(fov_coverage_v0.vector_env(num_envs=2, **kw))
+    # just above D_s is accepted, and the env alone takes any range
+    kw["detection_range_m"] = 2.01
+    SafetyFilterWrapper(fov_coverage_v0.parallel_env(**kw))
+    fov_coverage_v0.parallel_env(n_agents=3, detection_range_m=range_m)
