@@ -123,6 +123,15 @@ undetected beliefs; it cut the random-action change rate from 68% to 53%) the
 ``wait_charge`` adversary (N = 12, β = 120°, random start, seed 101) collided. Both
 stay off here; that episode is a regression test.
 
+Where it holds. The filter refuses an env whose camera cannot see to D_s
+(``detection_range_m <= safety_distance_m``, a ``ValueError``): a neighbour first
+seen inside D_s cannot be kept out of it, and a 1 m range (2 r) collided (red team
+9, :func:`filter_controller_params`). The stress sweeps behind the safety claim use
+the default 2000 particles; with 500 (``tracker_params={"n_particles_total": 500}``,
+3x faster) the default env swept clean, but robots started inside D_s (packed starts)
+collided in envs with 0.71 m detection noise, a 4 m camera, ``v_max_mps = 2`` or
+``dt_s = 0.4`` (CHANGELOG, known issues; none of them at 2000 particles).
+
 The particle filters start from the true start poses (the paper's assumption,
 VII-B) read from ``env.unwrapped.poses`` at reset; pass ``init="uniform"`` to avoid
 it. Filter randomness is seeded from the ``seed`` given to :meth:`reset` (child
