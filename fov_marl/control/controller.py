@@ -466,17 +466,17 @@ class FovCbfController:
     @staticmethod
     def _parse_safety(safety: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``safety`` as ``(A (K, 3) float, b (K,) float, kind (K,))``, else ``ValueError``."""
-        A, b, kind = safety_triple(safety)
+        A0, b0, kind0 = safety_triple(safety)
         try:
-            A = A.astype(np.float64).reshape(-1, 3)
-            b = b.astype(np.float64).reshape(-1)
+            A = A0.astype(np.float64).reshape(-1, 3)
+            b = b0.astype(np.float64).reshape(-1)
         except (TypeError, ValueError):
             A = b = np.zeros(0)  # reported below with the shapes given
-        kind = kind.reshape(-1)
+        kind = kind0.reshape(-1)
         if A.ndim != 2 or A.shape[0] != b.shape[0] or kind.shape[0] != b.shape[0]:
             raise ValueError(
                 f"safety rows must be A (K, 3), b (K,), kind (K,) real arrays; got "
-                f"{np.shape(safety[0])}, {np.shape(safety[1])}, {np.shape(safety[2])}"
+                f"{A0.shape}, {b0.shape}, {kind0.shape}"
             )
         return A, b, kind
 

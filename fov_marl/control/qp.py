@@ -172,6 +172,12 @@ def project_to_admissible(u: np.ndarray, v_max: float, omega_max: float, n: int)
         )
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 3:
         raise ValueError(f"n must be an integer >= 3 (polygon sides), got {n!r}")
+    return _project_admissible(out, v_max, omega_max, n)
+
+
+def _project_admissible(out: np.ndarray, v_max: float, omega_max: float, n: int) -> np.ndarray:
+    """:func:`project_to_admissible` in place on a fresh finite ``(3,)`` float64 ``out``,
+    unchecked (:class:`HierarchicalQP` checked its bounds at construction)."""
     apothem = v_max * math.cos(math.pi / n)
     vx, vy = out[0], out[1]
     k = round(math.atan2(vy, vx) * n / (2.0 * math.pi))
@@ -415,7 +421,9 @@ class HierarchicalQP:
     # ------------------------------------------------------------------ helpers
     def project(self, u: np.ndarray) -> np.ndarray:
         """Projection onto the admissible set (see :func:`project_to_admissible`)."""
-        return project_to_admissible(u, self.v_max, self.omega_max, self.n_polygon)
+        return _project_admissible(
+            np.array(u, dtype=np.float64), self.v_max, self.omega_max, self.n_polygon
+        )
 
     def admissible(self, u: np.ndarray, tol: float = 1e-7) -> bool:
         """Whether ``u`` satisfies the polygon and ω bounds up to ``tol``."""
