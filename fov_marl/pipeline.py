@@ -219,6 +219,7 @@ class PfCbfPipeline:
         #: last-seen points of the neighbours (world, NaN: never) and the blind travel
         #: (:mod:`fov_marl.control.safety` Sections 2c, 2d), per row
         self._last_seen_world = np.full((R, m, 2), np.nan)
+        self._detection_body = np.full((R, m, 2), np.nan)
         self._blind_travel_world = np.zeros((R, 2))
         #: approach per world bearing since the camera last looked at it (Section 2e)
         self._bearing_travel = np.zeros((R, self.controller_params.blind_travel_bearings))
@@ -271,6 +272,15 @@ class PfCbfPipeline:
         return arr
 
     def _read_cues(self, obs_m: np.ndarray, rows: np.ndarray | None = None) -> None:
+        o = obs_m if rows is None else obs_m[rows]
+        m = self.n - 1
+        slots = o[:, : SLOT_SIZE * m].reshape(o.shape[0], m, SLOT_SIZE)
+        # the camera's own report in Σ_i (safety Section 1d); NaN: not detected
+        z = np.where((slots[..., 0] > 0.5)[..., None], slots[..., 1:3], np.nan)
+        if rows is None:
+            self._detection_body = z.astype(np.float64)
+        else:
+            self._detection_body[rows] = z
         c = obs_m[:, self._cue] if rows is None else obs_m[rows, self._cue]
         pose = np.stack([c[:, 0], c[:, 1], np.arctan2(c[:, 3], c[:, 2])], -1)
         if rows is None:
@@ -543,6 +553,7 @@ class PfCbfPipeline:
             blind_travel_body=None if self.estimates == "oracle" else self._blind_travel_body(),
             particle_counts=None if parts is None else e["counts"],
             bearing_travel_m=None if self.estimates == "oracle" else self._bearing_travel,
+            detection_body=self._detection_body if self.estimates == "tracker" else None,
         )
 
     def _oracle(self, poses_world: np.ndarray | None) -> None:

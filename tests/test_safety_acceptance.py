@@ -22,8 +22,10 @@ from fov_marl.infos import safety_of
 #: that stay clear even without the rows they test)
 #: the arc guard before it could stop a creep to keep the turn (``arc_guard_stop``): every
 #: counterfactual below was found with the guard slowing the turn, and the stop sends its
-#: episode on another course (as it does the pfcbf mechanism tests)
-_BEFORE_STOP = {"arc_guard_stop": False}
+#: episode on another course (as it does the pfcbf mechanism tests); and the filter before
+#: its rows on the camera's own report (``detection_rows``, safety Section 1d), which
+#: every counterfactual below predates too
+_BEFORE_STOP = {"arc_guard_stop": False, "detection_rows": False}
 _BEFORE_CONE = {
     **_BEFORE_STOP,
     "bearing_cone_max_deg": 0.0,
@@ -449,6 +451,9 @@ def test_filter_survives_one_outlying_detection_of_a_seen_neighbour(ess_recovery
     from fov_marl.stress import StressCase, run_stress_episode
 
     fk = {"tracker_params": {"ess_recovery": ess_recovery}}
+    if ess_recovery == "reseed":  # the rows on the camera's own report (safety Section
+        # 1d) also keep this one clear (1.1 m): the counterfactual is the filter of then
+        fk["controller_params"] = {"detection_rows": False}
     case = StressCase("straight", 12, 360.0, "wall", filter_kwargs=fk)
     ep = run_stress_episode(case, 17000, 100)
     if ess_recovery == "fuse":
@@ -755,20 +760,16 @@ def test_filter_random_actions_long_episodes_change_rate_is_reported(fov_deg, bo
     assert np.mean(rates) < bound, rates
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="known issue (CHANGELOG): a detection noise of 0.71 m std with 500 particles "
-    "biases the estimate of a neighbour seen every step by ~0.5 m; the filter then drives "
-    "at it",
-)
-def test_filter_high_detection_noise_small_budget_known_collision():
-    """Red team (sixteenth-plus session): chase_last_seen, N = 8, β = 360°, wall start,
-    ``meas_cov_diag = (0.5, 0.5, 1.0)``, ``n_particles_total = 500``, seed 43201: robot 2
-    sees robot 1 (1.1 m away) every step, its estimate's mean drifts ~0.5 m short and
-    then through the robot itself, and the safety fallback keeps a full-speed forward step
-    that no row (on that estimate) forbids: contact at step 175, 0.508 m. With the default
-    2000 particles the same episode keeps 1.1 m. Strict: it fails the day this is fixed."""
+@pytest.mark.parametrize("detection_rows", [True, False])
+def test_filter_high_detection_noise_small_budget(detection_rows):
+    """Red team 9: chase_last_seen, N = 8, β = 360°, wall start, ``meas_cov_diag = (0.5,
+    0.5, 1.0)``, ``n_particles_total = 500``, seed 43201. Robot 2 sees robot 1 (1.1 m
+    ahead) every step, but its 500-particle posterior drifts through robot 2 itself (mean
+    (−0.08, 0) m): the neighbour row's line of sight points backwards, its retreat asks
+    for full speed forward, and without the rows on the camera's own report
+    (``detection_rows``, safety Section 1d; the counterfactual, a strict xfail of the
+    previous release) robot 2 drives into robot 1 (step 175, 0.508 m). With them the
+    detection forbids the approach, and no pair comes closer than its 1.1 m start."""
     from fov_marl.stress import StressCase, run_stress_episode
 
     case = StressCase(
@@ -777,7 +778,13 @@ def test_filter_high_detection_noise_small_budget_known_collision():
         360.0,
         "wall",
         env_kwargs={"meas_cov_diag": [0.5, 0.5, 1.0]},
-        filter_kwargs={"tracker_params": {"n_particles_total": 500}},
+        filter_kwargs={
+            "tracker_params": {"n_particles_total": 500},
+            "controller_params": {"detection_rows": detection_rows},
+        },
     )
     ep = run_stress_episode(case, 43201, 300)
-    assert ep["collisions"] == 0, ep
+    if detection_rows:
+        assert ep["collisions"] == 0 and ep["min_distance_m"] >= 1.1 - 1e-6, ep
+    else:
+        assert ep["collisions"] > 0, ep

@@ -487,6 +487,7 @@ class ControllerParams:
     arc_yaw_guard: bool = True
     arc_guard_stop: bool = True
     hold_cleanup: bool = True
+    detection_rows: bool = False
     look_yields_fov: bool = False
     walls: bool = True
     wall_gain: float = 2.5
@@ -549,6 +550,7 @@ class ControllerParams:
             "hold_cleanup",
             "look_yields_fov",
             "hold_band_barrier",
+            "detection_rows",
         ):
             _check_bool(name, getattr(self, name))
         _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)

@@ -377,6 +377,7 @@ __all__ = [
     "wall_clearances",
     "blind_density_rows",
     "last_seen_rows",
+    "detection_rows",
     "blind_travel_step",
     "blind_travel_reset",
     "bearing_angles_body",
@@ -793,6 +794,30 @@ def last_seen_rows(
     return n, h
 
 
+def detection_rows(
+    detection_body: np.ndarray, meas_cov_xy: np.ndarray, z: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows on the camera's own report of each detected neighbour (Section 1d).
+
+    Args:
+        detection_body: ``(R, M, 2)`` the last observation's detections ``ⁱz_j`` in Σ_i
+            (m); NaN where the neighbour was not detected.
+        meas_cov_xy: ``(2, 2)`` Σ_MEAS of the position (m²), the camera's noise.
+        z: the one-sided quantile (:func:`risk_quantile`).
+
+    Returns:
+        ``(n (R, M, 2) unit lines of sight, s (R, M) m)`` as :func:`neighbour_halfplanes`
+        gives for the detection taken as a Gaussian with covariance Σ_MEAS; ``s = +inf``
+        (and ``n = 0``) where there is no detection or it lies at the robot's centre.
+    """
+    zb = np.asarray(detection_body, dtype=np.float64)
+    r = np.hypot(zb[..., 0], zb[..., 1])
+    on = np.isfinite(r) & (r > 1e-9)
+    cov = np.broadcast_to(np.asarray(meas_cov_xy, dtype=np.float64), zb.shape + (2,))
+    n, s = neighbour_halfplanes(np.where(on[..., None], zb, 1.0), cov, z)
+    return np.where(on[..., None], n, 0.0), np.where(on, s, np.inf)
+
+
 def blind_travel_step(
     e_world: np.ndarray,
     v_body: np.ndarray,
@@ -997,6 +1022,7 @@ def team_safety_rows(
     blind_travel_body: np.ndarray | None = None,
     particle_counts: np.ndarray | None = None,
     bearing_travel_m: np.ndarray | None = None,
+    detection_body: np.ndarray | None = None,
 ) -> SafetyRows:
     """:func:`safety_rows` with the scenario's quantities and the controller's knobs.
 
@@ -1010,6 +1036,9 @@ def team_safety_rows(
         bearing_travel_m: ``(R, K_b)`` the approach per budget bearing (Section 2e),
             used with ``params.blind_travel_bearings > 0`` in place of
             ``blind_travel_body`` (needs ``pose_world`` for the robots' yaw).
+        detection_body: ``(R, M, 2)`` the last observation's detections in Σ_i (m, NaN:
+            not detected), used with ``params.detection_rows`` (Section 1d), Σ_MEAS from
+            ``config.meas_cov_diag``.
         The arrays: as in :func:`safety_rows`; ``pose_world=None`` gives no wall rows.
     """
     per_bearing = params.blind_travel_bearings > 0
@@ -1054,6 +1083,8 @@ def team_safety_rows(
         particle_counts=particle_counts,
         undetected_quantile=params.undetected_quantile,
         bearing_cone_max_rad=math.radians(params.bearing_cone_max_deg),
+        detection_body=detection_body if params.detection_rows else None,
+        meas_cov_xy=np.diag(np.asarray(config.meas_cov_diag[:2], dtype=np.float64)),
     )
 
 
@@ -1156,6 +1187,8 @@ def safety_rows(
     particle_counts: np.ndarray | None = None,
     undetected_quantile: str = "gaussian",
     bearing_cone_max_rad: float = 0.0,
+    detection_body: np.ndarray | None = None,
+    meas_cov_xy: np.ndarray | None = None,
 ) -> SafetyRows:
     """All collision rows of every robot (module docstring, Sections 1-3).
 
@@ -1188,12 +1221,17 @@ def safety_rows(
         bearing_cone_max_rad: cap on the half-angle α of the bearing cone of the
             neighbour rows within D_s (Section 1b, :func:`bearing_cone`); 0: none
             (one row along the mean's line of sight).
+        detection_body, meas_cov_xy: ``(R, M, 2)`` the last observation's detections in
+            Σ_i (m, NaN: not detected) and ``(2, 2)`` Σ_MEAS of the position (m²), for
+            the rows on the camera's own report (Section 1d, :func:`detection_rows`);
+            None: no such rows.
         The rest: scenario quantities and the ``ControllerParams`` fields of the
         same names.
 
     Returns:
-        :class:`SafetyRows` with up to ``K = 4 M + 2 blind_bins + 5`` rows per robot
-        (padded; ``2 M + ...`` without the bearing cone).
+        :class:`SafetyRows` with up to ``K = 5 M + 2 blind_bins + 5`` rows per robot
+        (padded; ``M`` fewer without the detection rows, ``2 M`` fewer without the
+        bearing cone).
     """
     mu = np.asarray(mean_body, dtype=np.float64)
     R, M = mu.shape[0], mu.shape[1]
@@ -1249,6 +1287,18 @@ def safety_rows(
                 blocks_b.append(np.where(inside, b, np.inf))
                 blocks_k.append(np.where(inside, ROW_CONE, -1).astype(np.int8))
                 blocks_h.append(np.where(inside, h, np.inf))
+
+    if detection_body is not None and meas_cov_xy is not None and M:
+        # Section 1d: the camera's own report bounds the approach, never pushes
+        n_z, s_z = detection_rows(detection_body, meas_cov_xy, risk_quantile(safety_risk))
+        on = np.isfinite(s_z)
+        h = np.where(on, s_z - safety_distance_m - m_arc, np.inf)
+        A = np.zeros((R, M, 3))
+        A[..., 0:2] = -n_z
+        blocks_A.append(A)
+        blocks_b.append(np.where(on, np.maximum(0.0, gain * np.where(on, h, 0.0)), np.inf))
+        blocks_k.append(np.where(on, ROW_NEIGHBOUR, -1).astype(np.int8))
+        blocks_h.append(h)
 
     if blind_bins > 0 and particles_body is not None and M:
         # beyond this range a row allows ≥ v_max: it would be pruned

@@ -182,6 +182,7 @@ __all__ = [
 #: (:func:`filter_controller_defaults`).
 FILTER_CONTROLLER_DEFAULTS: dict[str, Any] = {
     "deadlock_turn_deg": 0.0,
+    "detection_rows": True,
     "blind_travel_m": 0.5,
     "blind_travel_bearings": 24,
     "blind_travel_memory_s": math.inf,

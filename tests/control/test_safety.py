@@ -1170,3 +1170,88 @@ def _worst_blind_step(v_max: float, dt: float, controller_params: dict | None = 
         if blind.any():
             worst = max(worst, float(np.hypot(d[blind, 0], d[blind, 1]).max()))
     return worst
+
+
+def test_detection_rows_are_the_chance_constraint_of_the_raw_detection():
+    """Section 1d: n = z/‖z‖, s = ‖z‖ − z_δ σ_z with σ_z² = nᵀ Σ_MEAS n; no row (s = +inf)
+    for a neighbour not detected (NaN) or a detection at the robot's centre."""
+    from fov_marl.control.safety import detection_rows
+
+    cov = np.diag([0.1, 0.4])
+    zq = risk_quantile(0.01)
+    z = np.array([[[3.0, 0.0], [0.0, -2.0], [np.nan, np.nan], [0.0, 0.0], [3.0, 4.0]]])
+    n, s = detection_rows(z, cov, zq)
+    assert np.isfinite(s[0]).tolist() == [True, True, False, False, True]
+    np.testing.assert_allclose(n[0, 0], [1.0, 0.0])
+    np.testing.assert_allclose(n[0, 1], [0.0, -1.0])
+    np.testing.assert_allclose(s[0, 0], 3.0 - zq * math.sqrt(0.1))
+    np.testing.assert_allclose(s[0, 1], 2.0 - zq * math.sqrt(0.4))
+    np.testing.assert_allclose(s[0, 4], 5.0 - zq * math.sqrt(0.36 * 0.1 + 0.64 * 0.4))
+    assert not n[0, 2:4].any()
+
+
+def test_detection_rows_bound_the_approach_to_what_the_camera_sees_and_never_push():
+    """A detected neighbour whose posterior has drifted through the robot (mean behind it,
+    the red-team case) while the camera sees it 1.1 m ahead: the posterior's row asks for
+    a retreat *forward*, the detection's row forbids any forward speed, so no input
+    approaches the camera's neighbour. Beyond D_s + z σ the detection row allows the
+    shared barrier's approach; it never demands a retreat (b ≥ 0)."""
+    cov_meas = np.diag([0.5, 0.5])
+    kw = dict(
+        mean_body=np.array([[[-0.08, 0.0]]]),
+        cov_body=np.tile(np.diag([0.2, 0.03]), (1, 1, 1, 1)),
+        detected=np.ones((1, 1), bool),
+        meas_cov_xy=cov_meas,
+    )
+    without = _rows(**kw)
+    A0, b0, k0 = without.robot(0)
+    post = np.flatnonzero(k0 == ROW_NEIGHBOUR)
+    assert post.size == 1 and A0[post[0], 0] > 0.99 and b0[post[0]] < 0.0  # retreat forward
+    rows = _rows(detection_body=np.array([[[1.1, 0.0]]]), **kw)
+    A, b, kind = rows.robot(0)
+    det = np.flatnonzero((kind == ROW_NEIGHBOUR) & (A[:, 0] < -0.99))
+    assert det.size == 1 and b[det[0]] == 0.0
+    for u in ([0.5, 0.0, 0.0], [1.0, 0.3, 0.0], [0.0, 0.0, 1.0], [-0.5, 0.0, 0.0]):
+        ok = bool(A[det[0]] @ np.array(u) + b[det[0]] >= -1e-12)
+        assert ok == (u[0] <= 0.0), u
+    m_arc = arc_margin(CFG.v_max_mps, CFG.omega_max_radps, CFG.dt_s)
+    p = ControllerParams()
+    far = _rows(detection_body=np.array([[[6.0, 0.0]]]), **kw)
+    A2, b2, k2 = far.robot(0)
+    d2 = np.flatnonzero((k2 == ROW_NEIGHBOUR) & (A2[:, 0] < -0.99))
+    s = 6.0 - risk_quantile(p.safety_risk) * math.sqrt(0.5)
+    gain = p.responsibility * p.safety_gain
+    np.testing.assert_allclose(b2[d2[0]], gain * (s - CFG.safety_distance_m - m_arc))
+    none = _rows(detection_body=np.full((1, 1, 2), np.nan), **kw)
+    assert none.robot(0)[2].size == without.robot(0)[2].size
+
+
+def test_detection_rows_are_the_filters_and_not_pfcbfs():
+    """``detection_rows`` is on in the safety filter (FILTER_CONTROLLER_DEFAULTS), off in
+    ControllerParams (pfcbf), and the pipeline passes the camera's report: a seen
+    neighbour 2.5 m ahead gives one more neighbour row with it on, at the detection's
+    bearing, and none with it off; a non-bool is refused."""
+    from fov_marl.envs import fov_coverage_v0
+    from fov_marl.pipeline import PfCbfPipeline
+    from fov_marl.validation import ConfigError
+    from fov_marl.wrappers.safety_filter import FILTER_CONTROLLER_DEFAULTS
+
+    assert FILTER_CONTROLLER_DEFAULTS["detection_rows"] is True
+    assert ControllerParams().detection_rows is False
+    with pytest.raises(ConfigError, match="detection_rows"):
+        ControllerParams(detection_rows=1)
+    poses = np.array([[10.0, 10.0, 0.0], [12.5, 10.0, math.pi], [30.0, 30.0, 0.0]])
+    env = fov_coverage_v0.parallel_env(n_agents=3, initial_poses=poses, fov_deg=120.0)
+    obs, _ = env.reset(seed=1)
+    counts = []
+    for on in (False, True):
+        pipe = PfCbfPipeline(env.config, controller_params=ControllerParams(detection_rows=on))
+        pipe.reset(obs, seed=1, initial_poses_world=poses)
+        assert pipe._est["detected"][0, 0]
+        z = obs["robot_0"][1:3].astype(np.float64)  # robot 1's slot: [det, x, y, cos, sin]
+        np.testing.assert_allclose(pipe._detection_body[0, 0], z)
+        assert np.isnan(pipe._detection_body[0, 1]).all()  # robot 2: not seen
+        A, b, kind = pipe.safety_rows().robot(0)
+        nz = z / np.linalg.norm(z)
+        counts.append(int(np.sum((kind == ROW_NEIGHBOUR) & (np.abs(A[:, :2] @ nz + 1.0) < 1e-9))))
+    assert counts == [0, 1]
