@@ -199,6 +199,12 @@ field                        default   source / reason
                                        hold_cleanup`), else the safe fallback; off
                                        is an ablation (a packed robot crept 0.13 mm
                                        into an unseen neighbour)
+``detection_rows``           False     each detected neighbour also gets a row on the
+                                       camera's raw detection with Σ_MEAS (never a
+                                       push: approach only), so a posterior that drifts
+                                       does not steer the robot into a neighbour it
+                                       sees (:mod:`~fov_marl.control.safety` Section
+                                       1d); on in ``SafetyFilterWrapper``, off in pfcbf
 ``lost_fov_yield``           True      the FoV levels of neighbours the camera does not
                                        report yield when they stall the robot
                                        (:meth:`~fov_marl.control.controller.
@@ -408,6 +414,9 @@ class ControllerParams:
             :func:`~fov_marl.control.safety.arc_yaw_guard`); False: always slow the turn.
         hold_cleanup: correct an output creeping towards a held collision row within
             the cascade's tolerance (:func:`~fov_marl.control.controller.hold_cleanup`).
+        detection_rows: add a row on each detected neighbour's raw detection (the
+            camera's report with Σ_MEAS; :func:`~fov_marl.control.safety.detection_rows`),
+            which only takes approach away; needs the pipeline's observations.
         look_yields_fov: leave the FoV rows out of the step of a robot the look before
             the leap turns (``glance`` of :meth:`~fov_marl.control.FovCbfController.solve`).
         lost_fov_yield: when the robot is stalled (less than a fifth of u*'s

@@ -155,6 +155,47 @@ nothing, so the robot neither moved nor looked; all six stood still, η 0.06 aft
 60 s. With the stop they turn to look: η 0.96. Behind the safety filter at 90° (seeds
 0 / 7 / 9, η after 30 s): 0.53 / 0.38 / 0.42 before, 0.98 / 0.41 / 0.99 with it.
 
+1d. The camera's own report
+---------------------------
+
+The row of a *detected* neighbour is drawn on its posterior (Section V), and a
+posterior can be wrong while the camera is right. Measured (red team 9: the
+``chase_last_seen`` adversary, N = 8, β = 360°, robots packed 1.1 m apart along a wall,
+seed 43201, detection noise ``meas_cov_diag = (0.5, 0.5, 1.0)``, 500 particles): robot 2
+saw robot 1 1.1 m ahead every step, but its posterior (a spurious constant-velocity
+mode) drifted through robot 2 itself, to (−0.08, 0) m. The row's line of sight then
+pointed backwards, its retreat asked for full speed *forward*, the safe fallback kept
+that step, and robot 2 drove into robot 1 (0.508 m). A 0.5 m bias at 0.71 m noise is
+0.7 σ of one detection: the tracker's bias test cannot see it in time. With
+``ControllerParams.detection_rows`` (:func:`detection_rows`) each detected neighbour
+also gets the same chance constraint on the raw detection ``z`` with the camera's own
+covariance Σ_MEAS, which does not depend on the tracker:
+
+    n_z · v ≤ max(0, ρ γ h_z),   h_z = ‖z‖ − z_δ σ_z − D_s − m_arc,
+    n_z = z / ‖z‖,   σ_z² = n_zᵀ Σ_MEAS n_z
+
+It only takes approach away (the floor at 0): the robot never closes on where its
+camera sees a neighbour faster than the shared barrier allows, whatever its filter
+believes, and one noisy detection never pushes it (the posterior's row does the
+pushing). Where the two disagree, as above, the safety level is infeasible and the safe
+fallback stops the translation. The price is a larger margin towards seen neighbours
+while approaching: at the default noise (σ = 0.32 m, z_δ = 2.33) approach ends where the
+detection is 2.77 m away, instead of where the posterior's band (std ~0.1-0.2 m) is
+D_s away. On in :class:`~fov_marl.wrappers.SafetyFilterWrapper`
+(:data:`~fov_marl.wrappers.safety_filter.FILTER_CONTROLLER_DEFAULTS`), off in
+:class:`~fov_marl.control.params.ControllerParams` and so in pfcbf, whose acceptance
+sweeps (hours) were measured without it. Measured with the
+filter's defaults (2000 particles), against the same runs without the rows: the stress
+sweep of 432 episodes (nine adversaries, N 2/8/12/24, β 45/120/360°, four starts, seed
+50000) had no collision either way, and its minimum distance from open starts rose from
+1.873 m (random; one D_s event) and 2.186 m (head-on pairs) to 2.316 m and 2.345 m (no
+D_s event), at the same intervention rates (0.921 and 0.936); pfcbf behind the filter
+(N = 6, seeds 0-19, 1000 steps) reached the normalised threshold in 9.63 s against
+9.61 s, final η 0.9954 against 0.9955. The red-team episode keeps its 1.1 m start
+spacing (``tests/test_safety_acceptance.py``), and so does the stress grid's seed-17000
+collision (one outlying detection re-seeded a neighbour's cloud onto the robot itself,
+``TrackerParams.ess_recovery``) run on the tracker without its fused recovery.
+
 2. Blind rows: a speed bound per direction from the particles (Eq. 4)
 ====================================================================
 

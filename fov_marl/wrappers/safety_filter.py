@@ -87,7 +87,12 @@ ablation, not stress-swept.
 
 The controller defaults are :class:`~fov_marl.control.ControllerParams`' except
 :data:`FILTER_CONTROLLER_DEFAULTS`: no "keep right" deadlock steering, which would
-add a behaviour of the filter's own to the policy's; and the blind travel budget
+add a behaviour of the filter's own to the policy's; rows on the camera's own report
+of each seen neighbour (``detection_rows``, :mod:`fov_marl.control.safety` Section 1d:
+a robot never closes on where its camera sees a neighbour faster than the raw
+detection's chance constraint allows, whatever its tracker believes; red team 9 had a
+posterior drift through the robot and its row steer the robot into the neighbour it
+saw); and the blind travel budget
 (``blind_travel_m = 0.5`` m, per bearing, no leak, the glance outranking the FoV levels;
 :mod:`fov_marl.control.safety` Sections 2d-2e, :func:`filter_controller_defaults`):
 an arbitrary
