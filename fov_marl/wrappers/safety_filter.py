@@ -135,7 +135,9 @@ seen inside D_s cannot be kept out of it, and a 1 m range (2 r) collided (red te
 the default 2000 particles; with 500 (``tracker_params={"n_particles_total": 500}``,
 3x faster) the default env swept clean, but robots started inside D_s (packed starts)
 collided in envs with 0.71 m detection noise, a 4 m camera, ``v_max_mps = 2`` or
-``dt_s = 0.4`` (CHANGELOG, known issues; none of them at 2000 particles).
+``dt_s = 0.4`` (none of them at 2000 particles). The rows on the camera's report keep
+all but one clear: with ``dt_s = 0.4`` a packed robot that never saw its neighbour
+drives blind into it (CHANGELOG, known issues).
 
 The particle filters start from the true start poses (the paper's assumption,
 VII-B) read from ``env.unwrapped.poses`` at reset; pass ``init="uniform"`` to avoid
