@@ -23,9 +23,10 @@ from fov_marl.infos import safety_of
 #: the arc guard before it could stop a creep to keep the turn (``arc_guard_stop``): every
 #: counterfactual below was found with the guard slowing the turn, and the stop sends its
 #: episode on another course (as it does the pfcbf mechanism tests); and the filter before
-#: its rows on the camera's own report (``detection_rows``, safety Section 1d), which
-#: every counterfactual below predates too
-_BEFORE_STOP = {"arc_guard_stop": False, "detection_rows": False}
+#: its rows on the camera's own report (``detection_rows``, safety Section 1d) and its
+#: release of last-seen points by their uncertainty (``last_seen_release``, Section 2c),
+#: which every counterfactual below predates too
+_BEFORE_STOP = {"arc_guard_stop": False, "detection_rows": False, "last_seen_release": "point"}
 _BEFORE_CONE = {
     **_BEFORE_STOP,
     "bearing_cone_max_deg": 0.0,
@@ -453,7 +454,7 @@ def test_filter_survives_one_outlying_detection_of_a_seen_neighbour(ess_recovery
     fk = {"tracker_params": {"ess_recovery": ess_recovery}}
     if ess_recovery == "reseed":  # the rows on the camera's own report (safety Section
         # 1d) also keep this one clear (1.1 m): the counterfactual is the filter of then
-        fk["controller_params"] = {"detection_rows": False}
+        fk["controller_params"] = {"detection_rows": False, "last_seen_release": "point"}
     case = StressCase("straight", 12, 360.0, "wall", filter_kwargs=fk)
     ep = run_stress_episode(case, 17000, 100)
     if ess_recovery == "fuse":
@@ -758,6 +759,35 @@ def test_filter_random_actions_long_episodes_change_rate_is_reported(fov_deg, bo
         assert rec.collisions == 0
         rates.append(rec.intervention_rate)
     assert np.mean(rates) < bound, rates
+
+
+@pytest.mark.parametrize("release", ["disk", "point"])
+def test_filter_packed_blind_pair_keeps_its_last_seen_row(release):
+    """Red team 9: head_on, N = 8, β = 45°, clustered start, ``dt_s = 0.4``, 500 particles,
+    seed 43600. Robot 7 saw robot 2 (1.45 m away) only at the start; the last-seen point,
+    its posterior's mean then, lay 0.75 m off the truth at −6°, inside the 45° view while
+    robot 2 stood at −47°. Released as "seen empty" (``last_seen_release="point"``, the
+    counterfactual) the row went, and 34 s later robot 7 translated blind into robot 2
+    (0.864 m). The filter releases a point only when its whole uncertainty disk is in view
+    (``"disk"``, safety Section 2c): no pair comes closer than the start's 1.449 m."""
+    from fov_marl.stress import StressCase, run_stress_episode
+
+    case = StressCase(
+        "head_on",
+        8,
+        45.0,
+        "clustered",
+        env_kwargs={"dt_s": 0.4},
+        filter_kwargs={
+            "tracker_params": {"n_particles_total": 500},
+            "controller_params": {"last_seen_release": release},
+        },
+    )
+    ep = run_stress_episode(case, 43600, 300)
+    if release == "disk":
+        assert ep["collisions"] == 0 and ep["min_distance_m"] >= 1.44, ep
+    else:
+        assert ep["collisions"] > 0, ep
 
 
 @pytest.mark.parametrize("detection_rows", [True, False])

@@ -92,6 +92,12 @@ field                        default   source / reason
 ``last_seen_max_age_s``      1e6       ... and while it is younger than this (s); no
                                        limit by default: with 10 s the head-on regression
                                        episode 1 (N = 12, β = 120°) collided again
+``last_seen_release``        point     when the camera releases a last-seen point:
+                                       ``"point"`` in view, or ``"disk"``: its whole
+                                       disk of radius z σ_meas in view (the safety
+                                       filter's; a point 0.75 m off the truth was
+                                       "seen empty" while the neighbour stood outside
+                                       a 45° view, and the robot drove into it)
 ``blind_travel_m``           0.0       B: how far a robot may get (net displacement)
                                        from where it last looked along its direction
                                        of travel before it must look there
@@ -380,6 +386,8 @@ class ControllerParams:
         last_seen_radius_m: range (m) within which a lost neighbour's last-seen
             point keeps its row, [0, 100]; 0 disables.
         last_seen_max_age_s: age (s) after which a last-seen point is released, (0, 1e6].
+        last_seen_release: ``"point"`` or ``"disk"``, when the camera's view releases a
+            last-seen point (:func:`~fov_marl.control.safety.last_seen_rows`).
         blind_travel_m: B in [0, 100] (m), the blind travel budget; 0 disables.
         blind_travel_memory_s: T in (0, 1e6] (s) or inf (no leak), the leak of the
             blind travel.
@@ -483,6 +491,7 @@ class ControllerParams:
     blind_density_risk: float = 0.02
     last_seen_radius_m: float = 5.0
     last_seen_max_age_s: float = 1e6
+    last_seen_release: str = "point"
     blind_travel_m: float = 0.0
     blind_travel_memory_s: float = 30.0
     blind_travel_view_deg: float = 10.0
@@ -567,6 +576,11 @@ class ControllerParams:
             raise ConfigError(
                 "fov_translation must be one of ('all', 'seen', 'none'), "
                 f"got {self.fov_translation!r}"
+            )
+        if self.last_seen_release not in ("point", "disk"):
+            raise ConfigError(
+                "last_seen_release must be one of ('point', 'disk'), "
+                f"got {self.last_seen_release!r}"
             )
         if self.undetected_quantile not in ("gaussian", "particles"):
             raise ConfigError(

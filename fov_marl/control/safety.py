@@ -253,7 +253,15 @@ with τ the time since the last detection: approach the point only while the dis
 neighbour can have reached since lies beyond D_s, never afterwards, and never be
 pushed by it. A point inside the camera's view is released (the camera shows the
 neighbour is not there); so is a point older than ``last_seen_max_age_s`` (no limit
-by default: with 10 s the head-on regression episode 1 collided again). Only the
+by default: with 10 s the head-on regression episode 1 collided again). The point is
+only as good as the estimate it was taken from: with ``last_seen_release="disk"`` (the
+safety filter's) it is released only when its whole disk of radius ``z σ_meas`` lies
+in view (bearing within ``β/2 − asin(z σ_meas / ‖c‖)``, range within ``R_d − z σ_meas``).
+Measured (red team 9, 500 particles, ``dt_s = 0.4``, ``head_on``, N = 8, β = 45°,
+clustered, seed 43600): a packed robot's last-seen point of a neighbour 1.45 m away,
+the posterior's mean at its last detection, lay 0.75 m off the truth at −6°, inside
+the 45° view while the neighbour stood at −47°; released, the robot later translated
+blind into it (0.864 m). With the disk rule the pair keeps its start spacing. Only the
 direction towards the point is forbidden: the robot may still move away from it,
 sideways, or forward where it looks.
 
@@ -803,6 +811,7 @@ def last_seen_rows(
     fov_rad: float,
     detection_range_m: float,
     max_age_s: float = math.inf,
+    release: str = "point",
 ) -> tuple[np.ndarray, np.ndarray]:
     """Rows towards lost neighbours' last-seen points (Section 2c of the module docstring).
 
@@ -816,6 +825,9 @@ def last_seen_rows(
         v_max_mps: the neighbour's top speed (m/s).
         fov_rad, detection_range_m: the camera (a point it sees is released).
         max_age_s: a point older than this (s) is released.
+        release: ``"point"``: a point inside the camera's view is released; ``"disk"``:
+            only when its whole disk of radius ``reach_sigma_m`` (the last detection's
+            uncertainty) lies inside the view's sector and range.
 
     Returns:
         ``(n (R, M, 2) unit directions, h (R, M) m)`` with ``h = +inf`` where there is
@@ -826,7 +838,15 @@ def last_seen_rows(
     r = np.hypot(c[..., 0], c[..., 1])
     valid = np.isfinite(r) & ~np.asarray(detected, dtype=bool) & (r < radius_m) & (r > 1e-9)
     bearing = np.arctan2(c[..., 1], c[..., 0])
-    in_view = (np.abs(bearing) <= 0.5 * fov_rad) & (r <= detection_range_m)
+    if release == "disk":  # the point's uncertainty, not the point, must be in view
+        half = np.arcsin(np.minimum(1.0, reach_sigma_m / np.where(r > 1e-9, r, 1.0)))
+        in_view = (np.abs(bearing) + half <= 0.5 * fov_rad) & (
+            r + reach_sigma_m <= detection_range_m
+        )
+    elif release == "point":
+        in_view = (np.abs(bearing) <= 0.5 * fov_rad) & (r <= detection_range_m)
+    else:
+        raise ValueError(f"release must be 'point' or 'disk', got {release!r}")
     on = valid & ~in_view & (np.asarray(age_s, dtype=np.float64) <= max_age_s)
     safe_r = np.where(on, r, 1.0)
     n = np.where(on[..., None], c / safe_r[..., None], 0.0)
@@ -1114,6 +1134,7 @@ def team_safety_rows(
         last_seen_age_s=last_seen_age_s if use_last else None,
         last_seen_radius_m=params.last_seen_radius_m,
         last_seen_max_age_s=params.last_seen_max_age_s,
+        last_seen_release=params.last_seen_release,
         reach_sigma_m=risk_quantile(params.safety_risk) * float(max(config.meas_std[:2])),
         detection_range_m=config.detection_range_m,
         blind_travel_body=blind_travel_body if blind and not per_bearing else None,
@@ -1218,6 +1239,7 @@ def safety_rows(
     last_seen_age_s: np.ndarray | None = None,
     last_seen_radius_m: float = 0.0,
     last_seen_max_age_s: float = math.inf,
+    last_seen_release: str = "point",
     reach_sigma_m: float = 0.0,
     detection_range_m: float = math.inf,
     blind_travel_body: np.ndarray | None = None,
@@ -1387,6 +1409,7 @@ def safety_rows(
             fov_rad=fov_rad,
             detection_range_m=detection_range_m,
             max_age_s=last_seen_max_age_s,
+            release=last_seen_release,
         )
         on = np.isfinite(h_c)
         h = np.where(on, h_c - safety_distance_m - m_arc, np.inf)

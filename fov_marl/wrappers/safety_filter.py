@@ -190,6 +190,7 @@ __all__ = [
 FILTER_CONTROLLER_DEFAULTS: dict[str, Any] = {
     "deadlock_turn_deg": 0.0,
     "detection_rows": True,
+    "last_seen_release": "disk",
     "blind_travel_m": 0.5,
     "blind_travel_bearings": 24,
     "blind_travel_memory_s": math.inf,

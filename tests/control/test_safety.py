@@ -1255,3 +1255,31 @@ def test_detection_rows_are_the_filters_and_not_pfcbfs():
         nz = z / np.linalg.norm(z)
         counts.append(int(np.sum((kind == ROW_NEIGHBOUR) & (np.abs(A[:, :2] @ nz + 1.0) < 1e-9))))
     assert counts == [0, 1]
+
+
+def test_last_seen_release_disk_needs_the_points_uncertainty_in_view():
+    """``release="disk"`` (the filter's): a last-seen point 0.8 m ahead at −6° inside a
+    45° view is released by ``"point"`` but kept while its disk of radius z σ_meas
+    (0.74 m) reaches outside the view's sector; a point 6 m dead ahead is released by
+    both, one at 9.5 m (disk beyond the 10 m range) only by ``"point"``; a bad value is
+    refused, here and in ControllerParams."""
+    from fov_marl.control.safety import last_seen_rows
+    from fov_marl.validation import ConfigError
+
+    fov = math.radians(45.0)
+    ang = math.radians(-6.0)
+    c = np.array([[[0.8 * math.cos(ang), 0.8 * math.sin(ang)], [6.0, 0.0], [9.5, 0.0]]])
+    kw = dict(radius_m=20.0, reach_sigma_m=0.74, v_max_mps=1.0, fov_rad=fov, detection_range_m=10.0)
+    args = (c, np.full((1, 3), 1.0), np.zeros((1, 3), bool))
+    _, h_point = last_seen_rows(*args, **kw)
+    _, h_disk = last_seen_rows(*args, release="disk", **kw)
+    assert np.isfinite(h_point[0]).tolist() == [False, False, False]
+    assert np.isfinite(h_disk[0]).tolist() == [True, False, True]
+    with pytest.raises(ValueError, match="release"):
+        last_seen_rows(*args, release="bearing", **kw)
+    with pytest.raises(ConfigError, match="last_seen_release"):
+        ControllerParams(last_seen_release="bearing")
+    from fov_marl.wrappers.safety_filter import FILTER_CONTROLLER_DEFAULTS
+
+    assert FILTER_CONTROLLER_DEFAULTS["last_seen_release"] == "disk"
+    assert ControllerParams().last_seen_release == "point"
