@@ -257,7 +257,11 @@ def test_filter_packed_wall_start_dips_without_the_bearing_cone():
     assert ep["min_distance_m"] >= 1.1 - 1e-6, ep
     # on the filter it was found with: before the arc guard and the budget per bearing,
     # either of which also keeps this episode at 1.1 m without the cone
-    cp = {"bearing_cone_max_deg": 0.0, "arc_yaw_guard": False, "blind_travel_bearings": 0}
+    # (and before the detection rows, which also keep it at 1.1 m: _BEFORE_STOP)
+    cp = {
+        "bearing_cone_max_deg": 0.0, "arc_yaw_guard": False, "blind_travel_bearings": 0,
+        **_BEFORE_STOP,
+    }  # fmt: skip
     fk = {"controller_params": cp, "tracker_params": _BEFORE_FUSION}  # and its tracker
     off = StressCase("spin_charge", 12, 360.0, "wall", filter_kwargs=fk)
     assert run_stress_episode(off, 1001, 300)["min_distance_m"] < 1.099
