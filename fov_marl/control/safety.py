@@ -879,6 +879,29 @@ def detection_rows(
     return np.where(on[..., None], n, 0.0), np.where(on, s, np.inf)
 
 
+def _approach_only_rows(
+    n: np.ndarray, clear_m: np.ndarray, kind: int, d_s_m: float, m_arc_m: float, gain: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Rows that only take approach away (Sections 1d and 2c): ``n · v ≤ max(0, g h)``,
+    ``h = clear − D_s − m_arc``, never a push.
+
+    Args:
+        n: ``(R, M, 2)`` unit directions in Σ_i. clear_m: ``(R, M)`` clearance along n (m);
+            +inf where there is no row. kind: the rows' ``SafetyRows.kind`` code.
+        d_s_m, m_arc_m: D_s and the arc margin (m). gain: ρ γ (1/s).
+
+    Returns:
+        ``(A (R, M, 3), b (R, M), kind (R, M) int8, h (R, M))`` blocks of :class:`SafetyRows`
+        (b, h = +inf and kind = −1 where there is no row).
+    """
+    on = np.isfinite(clear_m)
+    h = np.where(on, clear_m - d_s_m - m_arc_m, np.inf)
+    A = np.zeros(n.shape[:-1] + (3,))
+    A[..., 0:2] = -n
+    b = np.where(on, np.maximum(0.0, gain * np.where(on, h, 0.0)), np.inf)
+    return A, b, np.where(on, kind, -1).astype(np.int8), h
+
+
 def blind_travel_step(
     e_world: np.ndarray,
     v_body: np.ndarray,
@@ -1354,14 +1377,12 @@ def safety_rows(
     if detection_body is not None and meas_cov_xy is not None and M:
         # Section 1d: the camera's own report bounds the approach, never pushes
         n_z, s_z = detection_rows(detection_body, meas_cov_xy, risk_quantile(safety_risk))
-        on = np.isfinite(s_z)
-        h = np.where(on, s_z - safety_distance_m - m_arc, np.inf)
-        A = np.zeros((R, M, 3))
-        A[..., 0:2] = -n_z
-        blocks_A.append(A)
-        blocks_b.append(np.where(on, np.maximum(0.0, gain * np.where(on, h, 0.0)), np.inf))
-        blocks_k.append(np.where(on, ROW_NEIGHBOUR, -1).astype(np.int8))
-        blocks_h.append(h)
+        for blocks, x in zip(
+            (blocks_A, blocks_b, blocks_k, blocks_h),
+            _approach_only_rows(n_z, s_z, ROW_NEIGHBOUR, safety_distance_m, m_arc, gain),
+            strict=True,
+        ):
+            blocks.append(x)
 
     if blind_bins > 0 and particles_body is not None and M:
         # beyond this range a row allows ≥ v_max: it would be pruned
@@ -1411,14 +1432,12 @@ def safety_rows(
             max_age_s=last_seen_max_age_s,
             release=last_seen_release,
         )
-        on = np.isfinite(h_c)
-        h = np.where(on, h_c - safety_distance_m - m_arc, np.inf)
-        A = np.zeros((R, M, 3))
-        A[..., 0:2] = -n_c
-        blocks_A.append(A)
-        blocks_b.append(np.where(on, np.maximum(0.0, gain * np.where(on, h, 0.0)), np.inf))
-        blocks_k.append(np.where(on, ROW_BLIND, -1).astype(np.int8))
-        blocks_h.append(h)
+        for blocks, x in zip(
+            (blocks_A, blocks_b, blocks_k, blocks_h),
+            _approach_only_rows(n_c, h_c, ROW_BLIND, safety_distance_m, m_arc, gain),
+            strict=True,
+        ):
+            blocks.append(x)
 
     if blind_travel_body is not None and blind_travel_m > 0.0:
         e = np.asarray(blind_travel_body, dtype=np.float64)
