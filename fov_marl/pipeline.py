@@ -65,6 +65,7 @@ from fov_marl.control.safety import (
     bearing_travel_step,
     blind_travel_reset,
     blind_travel_step,
+    reach_clear_bearings,
     team_safety_rows,
 )
 from fov_marl.estimation import TrackerParams, VectorTrackerBank
@@ -223,6 +224,11 @@ class PfCbfPipeline:
         self._blind_travel_world = np.zeros((R, 2))
         #: approach per world bearing since the camera last looked at it (Section 2e)
         self._bearing_travel = np.zeros((R, self.controller_params.blind_travel_bearings))
+        #: the neighbours' reachable disks (Section 2f): centre at the last detection
+        #: (world, NaN: never detected), its radius then (m) and the time since (s)
+        self._reach_world = np.full((R, m, 2), np.nan)
+        self._reach_base_m = np.zeros((R, m))
+        self._reach_age_s = np.zeros((R, m))
         self.counters = {"interventions": 0, "fallbacks": 0, "safety_fallbacks": 0}
 
     # ------------------------------------------------------------------ views
@@ -343,6 +349,7 @@ class PfCbfPipeline:
             self.last_timings = {"tracker": time.perf_counter() - t0}
             self._est = self._bank_estimate()
             self._reset_last_seen(np.arange(self.n_rows), init)
+            self._reset_reach(np.arange(self.n_rows), init)
         elif self.estimates == "oracle":
             self._oracle(init_all)
 
@@ -388,6 +395,60 @@ class PfCbfPipeline:
         det = self._est["detected"]
         pw = body_to_world(self._est["mean_body"], self._own_pose[:, None, :])
         self._last_seen_world = np.where(det[..., None], pw, self._last_seen_world)
+
+    def _reset_reach(self, rows: np.ndarray, init: np.ndarray | None) -> None:
+        """Start the reachable disks of ``rows`` (safety Section 2f): the known start poses
+        ``init (B, N, 3)`` are exact detections at t = 0; then this step's detections."""
+        self._reach_world[rows] = np.nan
+        self._reach_base_m[rows] = 0.0
+        self._reach_age_s[rows] = 0.0
+        if init is not None:
+            copy = rows // self.n
+            self._reach_world[rows] = np.asarray(init, dtype=np.float64)[
+                copy[:, None], self._ids[rows], :2
+            ]
+        self._take_reach_detections(rows)
+        self._clear_reached(rows)
+
+    def _update_reach(self) -> None:
+        """Age the reachable disks by one step, take this step's detections, and clear
+        the bearings they leave free (safety Section 2f)."""
+        self._reach_age_s += self.config.dt_s
+        rows = np.arange(self.n_rows)
+        self._take_reach_detections(rows)
+        self._clear_reached(rows)
+
+    def _take_reach_detections(self, rows: np.ndarray) -> None:
+        """Centre the disks of the neighbours ``rows`` detect now on the raw detection,
+        with the radius of the env's truncated noise (``meas_noise_clip_sigma`` std on
+        each axis; 1 mm for the observation's float32)."""
+        cfg = self.config
+        z = self._detection_body[rows]
+        det = np.isfinite(z[..., 0])
+        if not det.any():
+            return
+        zw = body_to_world(np.where(det[..., None], z, 0.0), self._own_pose[rows][:, None, :])
+        r_z = cfg.meas_noise_clip_sigma * math.hypot(*cfg.meas_std[:2]) + 1e-3
+        self._reach_world[rows] = np.where(det[..., None], zw, self._reach_world[rows])
+        self._reach_base_m[rows] = np.where(det, r_z, self._reach_base_m[rows])
+        self._reach_age_s[rows] = np.where(det, 0.0, self._reach_age_s[rows])
+
+    def _clear_reached(self, rows: np.ndarray) -> None:
+        """Zero the budget of the bearings of ``rows`` that no neighbour near the robot
+        can occupy (:func:`~fov_marl.control.safety.reach_clear_bearings`), with
+        ``blind_travel_reach`` and the budget per bearing."""
+        par, cfg = self.controller_params, self.config
+        K = self._bearing_travel.shape[1]
+        if not par.blind_travel_reach or K == 0 or par.blind_travel_m <= 0.0:
+            return
+        pose = self._own_pose[rows]
+        centre = world_to_body(self._reach_world[rows], pose[:, None, :])
+        radius = self._reach_base_m[rows] + cfg.v_max_mps * self._reach_age_s[rows]
+        horizon = cfg.safety_distance_m + 2.0 * par.blind_travel_m + 2.0 * cfg.v_max_mps * cfg.dt_s
+        clear = reach_clear_bearings(centre, radius, pose[:, 2], K, horizon)
+        sub = self._bearing_travel[rows]
+        sub[clear] = 0.0
+        self._bearing_travel[rows] = sub
 
     def _last_seen_body(self) -> np.ndarray:
         """``(B N, N − 1, 2)`` the last-seen points in each robot's Σ_i (NaN: never seen)."""
@@ -445,6 +506,7 @@ class PfCbfPipeline:
             )
             self._est = self._bank_estimate()
             self._reset_last_seen(rows, init)
+            self._reset_reach(rows, init)
         elif self.estimates == "oracle":
             self._oracle(init_all)
 
@@ -484,6 +546,7 @@ class PfCbfPipeline:
             )
             self._est = self._bank_estimate()
             self._update_last_seen()
+            self._update_reach()
             self.last_timings["tracker"] = time.perf_counter() - t0
         elif self.estimates == "oracle":
             self._oracle(self._poses(poses_world, "poses_world"))

@@ -128,6 +128,13 @@ field                        default   source / reason
                                        trusts the unseen neighbour to stand still: one
                                        that followed was approached 0.9 m blind on a
                                        0.5 m budget with 0.5 m of credit)
+``blind_travel_reach``       False     per bearing: a bearing no neighbour near the
+                                       robot can occupy (the disk it can have reached
+                                       since its last detection, at v_max) counts as
+                                       looked at (safety Section 2f,
+                                       :func:`~fov_marl.control.safety.
+                                       reach_clear_bearings`); True for the safety
+                                       filter
 ``look_yields_fov``          False     while the look before the leap turns the robot
                                        (:meth:`~fov_marl.pipeline.PfCbfPipeline.
                                        _look_before_leap`), its FoV levels are left
@@ -397,6 +404,8 @@ class ControllerParams:
             budget (0: the single net-displacement vector).
         blind_travel_credit_m: F in [0, 100] (m), with the budget per bearing the most
             credit moving away from a bearing builds towards it (Section 2e); 0: none.
+        blind_travel_reach: with the budget per bearing, clear the bearings no
+            neighbour's reachable disk near the robot can occupy (Section 2f).
         walls: add the arena walls as rows.
         wall_gain: γ_w (1/s) of the wall rows, (0, 1e3]; used as ``min(γ_w, 1/dt)``.
         deadlock_turn_deg: turn of u*'s translation (degrees, to the right) tried when
@@ -497,6 +506,7 @@ class ControllerParams:
     blind_travel_view_deg: float = 10.0
     blind_travel_bearings: int = 0
     blind_travel_credit_m: float = 0.0
+    blind_travel_reach: bool = False
     lost_sigma_max_m: float = math.inf
     undetected_quantile: str = "gaussian"
     bearing_cone_max_deg: float = 45.0
@@ -569,6 +579,7 @@ class ControllerParams:
             "look_yields_fov",
             "hold_band_barrier",
             "detection_rows",
+            "blind_travel_reach",
         ):
             _check_bool(name, getattr(self, name))
         _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)

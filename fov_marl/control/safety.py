@@ -379,6 +379,36 @@ an adversary crab-walking at β/2 − 10° went from 1.55 to 1.12 m towards one 
 robots of a 200-robot team that never saw each other each slid 49° off their heading
 (inside the view less the vector's 10° margin) and closed from 2.86 m to 0.994 m.
 
+2f. Bearings no neighbour can reach count as looked at
+------------------------------------------------------
+
+A look clears a bearing because it shows nobody there. What the robot knows without
+looking clears it as well: neighbour j was last *detected* at ``z`` (world frame) and
+moves at most ``v_max``, so ``τ`` seconds later it lies in the disk
+
+    D_j = disk(z, r_z + v_max τ),    r_z = c_clip ‖(σ_x, σ_y)‖
+
+with ``c_clip = meas_noise_clip_sigma`` (the env truncates its detection noise there,
+so the disk holds j surely, not with a probability; the known start poses of
+``init="known"`` count as detections at t = 0 with ``r_z = 0``; a neighbour never
+detected has no disk and blocks every bearing). With ``ControllerParams.
+blind_travel_reach`` the pipeline zeroes ``c_k`` (:func:`reach_clear_bearings`) for every
+bearing k that no disk *near* the robot can occupy: a disk is near when its edge lies
+within ``H = D_s + 2 B + 2 v_max dt`` (``d − r ≤ H``, d the centre's range), and it
+occupies the bearings within ``asin(r / d)`` of its centre's (all of them for ``d ≤ r``),
+widened by one bin spacing ``2π/K_b`` so that both bins around every bearing it may be
+at stay counted. A neighbour never leaves its disk, so a bin within one spacing of a
+neighbour's true bearing is cleared only while that neighbour is farther than H: when
+the bin stops being cleared the pair is at least ``H − 2 v_max dt = D_s + 2 B`` apart,
+and after the robot and the neighbour each spend their budget B towards each other it
+is still D_s apart (a look promises contact only, ``D_s − 2 B = 2 r``). What the rule
+shares with a look is the bins' caveat of Section 2e: a neighbour that moves sideways
+into a bearing cleared while it stood elsewhere meets a fresh budget there. A robot
+that keeps its neighbours in view, or whose last sightings are recent and far away,
+no longer spends its budget on directions nobody can be in. On in the safety filter,
+off in pfcbf (whose sweeps were measured without it). Measured below
+(:func:`fov_marl.wrappers.safety_filter.filter_controller_defaults`).
+
 3. Walls
 ========
 
@@ -434,6 +464,7 @@ __all__ = [
     "bearing_travel_reset",
     "bearings_in_view",
     "bearing_travel_rows",
+    "reach_clear_bearings",
     "hold_band",
     "neighbour_row_offsets",
     "safety_rows",
@@ -1062,6 +1093,47 @@ def bearing_travel_rows(
     A[..., 1] = -np.sin(ang)
     b = np.where(on, np.maximum(0.0, left / dt_s), np.inf)
     return A, b, np.where(on, left, np.inf)
+
+
+def reach_clear_bearings(
+    centre_body: np.ndarray,
+    radius_m: np.ndarray,
+    yaw_rad: np.ndarray,
+    n_bearings: int,
+    horizon_m: float,
+) -> np.ndarray:
+    """The budget bearings no neighbour near the robot can occupy (Section 2f).
+
+    Args:
+        centre_body: ``(R, M, 2)`` centres of the neighbours' reachable disks in Σ_i (m);
+            NaN: never detected (the neighbour blocks every bearing).
+        radius_m: ``(R, M)`` their radii (m).
+        yaw_rad: ``(R,)`` the robots' yaw (the bearings are world bearings, as in
+            :func:`bearing_angles_body`).
+        n_bearings: K_b ≥ 1.
+        horizon_m: H (m): a disk whose edge is farther than H blocks nothing.
+
+    Returns:
+        ``(R, K_b)`` bool, True where every neighbour's disk is farther than H or
+        more than ``asin(r / d) + 2π / K_b`` off the bearing.
+    """
+    c = np.asarray(centre_body, dtype=np.float64)
+    r = np.asarray(radius_m, dtype=np.float64)
+    ang = bearing_angles_body(n_bearings, yaw_rad)  # (R, K)
+    if c.shape[1] == 0:
+        return np.ones(ang.shape, dtype=bool)
+    d = np.hypot(c[..., 0], c[..., 1])
+    unknown = ~(np.isfinite(d) & np.isfinite(r))
+    d_ok = np.where(unknown, 1.0, d)
+    r_ok = np.where(unknown, 0.0, r)
+    near = unknown | (d_ok - r_ok <= horizon_m)
+    everywhere = unknown | (d_ok <= r_ok)
+    half = np.arcsin(np.clip(r_ok / np.maximum(d_ok, 1e-12), 0.0, 1.0))
+    half = half + 2.0 * math.pi / n_bearings
+    psi = np.arctan2(np.where(unknown, 0.0, c[..., 1]), np.where(unknown, 1.0, c[..., 0]))
+    diff = np.abs((ang[:, None, :] - psi[..., None] + math.pi) % (2.0 * math.pi) - math.pi)
+    blocked = near[..., None] & (everywhere[..., None] | (diff <= half[..., None]))
+    return ~blocked.any(axis=1)
 
 
 def wall_clearances(

@@ -196,6 +196,7 @@ FILTER_CONTROLLER_DEFAULTS: dict[str, Any] = {
     "blind_travel_m": 0.5,
     "blind_travel_bearings": 24,
     "blind_travel_memory_s": math.inf,
+    "blind_travel_reach": True,
     "look_yields_fov": True,
     "lost_fov_yield": False,
 }

@@ -757,8 +757,14 @@ def test_bearing_travel_rows_cover_unseen_bearings_when_one_step_exceeds_the_bud
 def test_filtered_robots_never_step_further_than_the_budget_into_an_unseen_bearing(v_max, dt):
     """The red team's episode (random actions, N = 3, β = 120°, 20 m arena, seed 0): no
     step moves a robot more than B (+ the arc's curvature) towards a bearing outside the
-    view it had at the step's start (before: 0.71-0.995 m with B = 0.5 m)."""
-    assert _worst_blind_step(v_max, dt) <= 0.5 + 0.05
+    view it had at the step's start (before: 0.71-0.995 m with B = 0.5 m), on the budget
+    alone (``blind_travel_reach`` off). With it (the filter's default, safety Section 2f)
+    a longer blind step goes only where no neighbour can be: no step approaches a
+    neighbour out of view and within H = D_s + 2 B + 2 v_max dt by more than B (over the
+    bins' spacing, 1/cos 7.5°; at v_max dt = 1 m some blind steps are 0.56 m)."""
+    assert _worst_blind_step(v_max, dt, {"blind_travel_reach": False})[0] <= 0.5 + 0.05
+    _, approach = _worst_blind_step(v_max, dt)
+    assert approach <= 0.5 / math.cos(math.pi / 24) + 0.05
 
 
 def test_blind_travel_bearings_validated():
@@ -1142,13 +1148,16 @@ def test_single_vector_budget_caps_unseen_directions_when_one_step_exceeds_it():
     """The single-vector budget (blind_travel_bearings = 0) had the per-bearing budget's
     gap: with v_max dt > B and a zero vector nothing bounded a blind step. Behind the
     filter with that budget no step moves more than B towards an unseen direction."""
-    assert _worst_blind_step(5.0, 0.2, {"blind_travel_bearings": 0}) <= 0.5 + 0.05
+    assert _worst_blind_step(5.0, 0.2, {"blind_travel_bearings": 0})[0] <= 0.5 + 0.05
 
 
-def _worst_blind_step(v_max: float, dt: float, controller_params: dict | None = None) -> float:
+def _worst_blind_step(
+    v_max: float, dt: float, controller_params: dict | None = None
+) -> tuple[float, float]:
     """Random actions behind the filter (N = 3, β = 120°, 20 m arena, seed 0, 150 steps):
     the longest step (m) a robot made towards a direction outside the view it had at the
-    step's start."""
+    step's start, and the most a step approached a neighbour outside that view and
+    within H = D_s + 2 B + 2 v_max dt (safety Section 2f)."""
     from fov_marl.envs import fov_coverage_v0
     from fov_marl.wrappers import SafetyFilterWrapper
 
@@ -1159,7 +1168,9 @@ def _worst_blind_step(v_max: float, dt: float, controller_params: dict | None = 
     env = SafetyFilterWrapper(base, controller_params=controller_params)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
-    worst = 0.0
+    cfg = base.config
+    horizon = cfg.safety_distance_m + 2.0 * 0.5 + 2.0 * v_max * dt
+    worst = approach = 0.0
     for _ in range(150):
         before = base.poses.copy()
         act = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
@@ -1169,7 +1180,15 @@ def _worst_blind_step(v_max: float, dt: float, controller_params: dict | None = 
         blind = off > math.radians(fov / 2)
         if blind.any():
             worst = max(worst, float(np.hypot(d[blind, 0], d[blind, 1]).max()))
-    return worst
+        for i in range(n):
+            for j in range(n):
+                rel = before[j, :2] - before[i, :2]
+                r = float(np.hypot(*rel))
+                bearing = math.atan2(rel[1], rel[0]) - before[i, 2]
+                unseen = abs(math.remainder(bearing, 2.0 * math.pi)) > math.radians(fov / 2)
+                if i != j and unseen and r <= horizon:
+                    approach = max(approach, float(d[i] @ rel) / r)
+    return worst, approach
 
 
 def test_detection_rows_are_the_chance_constraint_of_the_raw_detection():
@@ -1283,3 +1302,91 @@ def test_last_seen_release_disk_needs_the_points_uncertainty_in_view():
 
     assert FILTER_CONTROLLER_DEFAULTS["last_seen_release"] == "disk"
     assert ControllerParams().last_seen_release == "point"
+
+
+def _reach_clear_reference(centre, radius, yaw, k, horizon):
+    """Loop reference of :func:`reach_clear_bearings` (safety Section 2f)."""
+    R, M = radius.shape
+    out = np.ones((R, k), dtype=bool)
+    for r in range(R):
+        for b in range(k):
+            world = 2.0 * math.pi * b / k
+            for j in range(M):
+                cx, cy, rad = centre[r, j, 0], centre[r, j, 1], radius[r, j]
+                if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(rad)):
+                    out[r, b] = False  # never detected: anywhere
+                    continue
+                d = math.hypot(cx, cy)
+                if d - rad > horizon:
+                    continue  # too far to matter
+                if d <= rad:
+                    out[r, b] = False  # the robot is inside the disk: every bearing
+                    continue
+                off = abs(math.remainder(world - yaw[r] - math.atan2(cy, cx), 2.0 * math.pi))
+                if off <= math.asin(rad / d) + 2.0 * math.pi / k:
+                    out[r, b] = False
+    return out
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    k=st.sampled_from([4, 12, 24, 36]),
+    m=st.integers(0, 4),
+)
+def test_reach_clear_bearings_matches_its_loop_reference(seed, k, m):
+    from fov_marl.control.safety import reach_clear_bearings
+
+    rng = np.random.default_rng(seed)
+    centre = rng.uniform(-8.0, 8.0, (3, m, 2))
+    radius = rng.uniform(0.0, 6.0, (3, m))
+    centre[rng.random((3, m)) < 0.1] = np.nan  # never detected
+    yaw = rng.uniform(-4.0, 4.0, 3)
+    got = reach_clear_bearings(centre, radius, yaw, k, 3.4)
+    np.testing.assert_array_equal(got, _reach_clear_reference(centre, radius, yaw, k, 3.4))
+
+
+@settings(max_examples=80, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_reach_clear_bearings_keep_both_bins_around_every_reachable_point(seed):
+    """Wherever in a near disk the neighbour may stand, the two budget bearings around its
+    bearing (the bins whose rows bound the approach to it, Section 2e) stay counted, and
+    a bearing is cleared only if no point of a near disk lies within one bin of it."""
+    from fov_marl.control.safety import bearing_angles_body, reach_clear_bearings
+
+    rng = np.random.default_rng(seed)
+    K, H = 24, 3.4
+    centre = rng.uniform(-7.0, 7.0, (1, 2, 2))
+    radius = rng.uniform(0.1, 4.0, (1, 2))
+    yaw = rng.uniform(-4.0, 4.0, 1)
+    clear = reach_clear_bearings(centre, radius, yaw, K, H)[0]
+    ang = bearing_angles_body(K, yaw)[0]
+    for j in range(2):
+        c, r = centre[0, j], radius[0, j]
+        if np.hypot(*c) - r > H:
+            continue
+        for _ in range(200):  # points of the disk
+            rho, phi = r * math.sqrt(rng.random()), rng.uniform(-math.pi, math.pi)
+            p = c + rho * np.array([math.cos(phi), math.sin(phi)])
+            if np.hypot(*p) < 1e-9:
+                continue
+            off = np.abs(np.angle(np.exp(1j * (ang - math.atan2(p[1], p[0])))))
+            assert not clear[off <= 2.0 * math.pi / K].any()
+
+
+def test_reach_clear_bearings_cases():
+    """No neighbour: every bearing clear; one never detected: none; a far disk: all; a
+    disk around the robot: none; a near disk: only the bearings away from it."""
+    from fov_marl.control.safety import bearing_angles_body, reach_clear_bearings
+
+    K, H, yaw = 24, 3.4, np.zeros(1)
+    assert reach_clear_bearings(np.zeros((1, 0, 2)), np.zeros((1, 0)), yaw, K, H).all()
+    nan = np.full((1, 1, 2), np.nan)
+    assert not reach_clear_bearings(nan, np.zeros((1, 1)), yaw, K, H).any()
+    far = np.array([[[10.0, 0.0]]])
+    assert reach_clear_bearings(far, np.array([[6.5]]), yaw, K, H).all()  # edge 3.5 m > H
+    assert not reach_clear_bearings(far, np.array([[10.5]]), yaw, K, H).any()  # inside
+    near = reach_clear_bearings(far, np.array([[7.0]]), yaw, K, H)[0]  # edge 3 m: near
+    ang = np.abs(bearing_angles_body(K, yaw)[0])
+    half = math.asin(0.7) + 2.0 * math.pi / K  # 44.4° + 15°
+    np.testing.assert_array_equal(near, ang > half + 1e-12)
