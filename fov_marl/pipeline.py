@@ -65,7 +65,7 @@ from fov_marl.control.safety import (
     bearing_travel_step,
     blind_travel_reset,
     blind_travel_step,
-    reach_clear_bearings,
+    reach_clear,
     team_safety_rows,
 )
 from fov_marl.estimation import TrackerParams, VectorTrackerBank
@@ -434,21 +434,20 @@ class PfCbfPipeline:
         self._reach_age_s[rows] = np.where(det, 0.0, self._reach_age_s[rows])
 
     def _clear_reached(self, rows: np.ndarray) -> None:
-        """Zero the budget of the bearings of ``rows`` that no neighbour near the robot
-        can occupy (:func:`~fov_marl.control.safety.reach_clear_bearings`), with
-        ``blind_travel_reach`` and the budget per bearing."""
+        """Zero the whole budget of the ``rows`` no neighbour can be near
+        (:func:`~fov_marl.control.safety.reach_clear`), with ``blind_travel_reach`` and
+        the budget per bearing."""
         par, cfg = self.controller_params, self.config
-        K = self._bearing_travel.shape[1]
-        if not par.blind_travel_reach or K == 0 or par.blind_travel_m <= 0.0:
+        if not par.blind_travel_reach or self._bearing_travel.shape[1] == 0:
+            return
+        if par.blind_travel_m <= 0.0:
             return
         pose = self._own_pose[rows]
         centre = world_to_body(self._reach_world[rows], pose[:, None, :])
         radius = self._reach_base_m[rows] + cfg.v_max_mps * self._reach_age_s[rows]
         horizon = cfg.safety_distance_m + 2.0 * par.blind_travel_m + 2.0 * cfg.v_max_mps * cfg.dt_s
-        clear = reach_clear_bearings(centre, radius, pose[:, 2], K, horizon)
-        sub = self._bearing_travel[rows]
-        sub[clear] = 0.0
-        self._bearing_travel[rows] = sub
+        clear = rows[reach_clear(centre, radius, horizon)]
+        self._bearing_travel[clear] = 0.0
 
     def _last_seen_body(self) -> np.ndarray:
         """``(B N, N − 1, 2)`` the last-seen points in each robot's Σ_i (NaN: never seen)."""

@@ -128,13 +128,12 @@ field                        default   source / reason
                                        trusts the unseen neighbour to stand still: one
                                        that followed was approached 0.9 m blind on a
                                        0.5 m budget with 0.5 m of credit)
-``blind_travel_reach``       False     per bearing: a bearing no neighbour near the
-                                       robot can occupy (the disk it can have reached
-                                       since its last detection, at v_max) counts as
-                                       looked at (safety Section 2f,
-                                       :func:`~fov_marl.control.safety.
-                                       reach_clear_bearings`); True for the safety
-                                       filter
+``blind_travel_reach``       False     per bearing: while no neighbour can be within
+                                       D_s + 2 B + 2 v_max dt (the disk it can have
+                                       reached since its last detection, at v_max),
+                                       every bearing counts as looked at (safety
+                                       Section 2f, :func:`~fov_marl.control.safety.
+                                       reach_clear`); True for the safety filter
 ``look_yields_fov``          False     while the look before the leap turns the robot
                                        (:meth:`~fov_marl.pipeline.PfCbfPipeline.
                                        _look_before_leap`), its FoV levels are left
@@ -404,8 +403,8 @@ class ControllerParams:
             budget (0: the single net-displacement vector).
         blind_travel_credit_m: F in [0, 100] (m), with the budget per bearing the most
             credit moving away from a bearing builds towards it (Section 2e); 0: none.
-        blind_travel_reach: with the budget per bearing, clear the bearings no
-            neighbour's reachable disk near the robot can occupy (Section 2f).
+        blind_travel_reach: with the budget per bearing, clear it while no
+            neighbour's reachable disk comes near the robot (Section 2f).
         walls: add the arena walls as rows.
         wall_gain: γ_w (1/s) of the wall rows, (0, 1e3]; used as ``min(γ_w, 1/dt)``.
         deadlock_turn_deg: turn of u*'s translation (degrees, to the right) tried when

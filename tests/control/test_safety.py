@@ -1304,89 +1304,62 @@ def test_last_seen_release_disk_needs_the_points_uncertainty_in_view():
     assert ControllerParams().last_seen_release == "point"
 
 
-def _reach_clear_reference(centre, radius, yaw, k, horizon):
-    """Loop reference of :func:`reach_clear_bearings` (safety Section 2f)."""
+def _reach_clear_reference(centre, radius, horizon):
+    """Loop reference of :func:`reach_clear` (safety Section 2f)."""
     R, M = radius.shape
-    out = np.ones((R, k), dtype=bool)
+    out = np.ones(R, dtype=bool)
     for r in range(R):
-        for b in range(k):
-            world = 2.0 * math.pi * b / k
-            for j in range(M):
-                cx, cy, rad = centre[r, j, 0], centre[r, j, 1], radius[r, j]
-                if not (math.isfinite(cx) and math.isfinite(cy) and math.isfinite(rad)):
-                    out[r, b] = False  # never detected: anywhere
-                    continue
-                d = math.hypot(cx, cy)
-                if d - rad > horizon:
-                    continue  # too far to matter
-                if d <= rad:
-                    out[r, b] = False  # the robot is inside the disk: every bearing
-                    continue
-                off = abs(math.remainder(world - yaw[r] - math.atan2(cy, cx), 2.0 * math.pi))
-                if off <= math.asin(rad / d) + 2.0 * math.pi / k:
-                    out[r, b] = False
+        for j in range(M):
+            cx, cy, rad = centre[r, j, 0], centre[r, j, 1], radius[r, j]
+            if not (math.isfinite(cx) and math.isfinite(cy)):
+                out[r] = False  # never detected: it may be anywhere
+            elif math.hypot(cx, cy) - rad <= horizon:
+                out[r] = False  # it may be within H
     return out
 
 
 @settings(max_examples=80, deadline=None)
-@given(
-    seed=st.integers(0, 2**31 - 1),
-    k=st.sampled_from([4, 12, 24, 36]),
-    m=st.integers(0, 4),
-)
-def test_reach_clear_bearings_matches_its_loop_reference(seed, k, m):
-    from fov_marl.control.safety import reach_clear_bearings
+@given(seed=st.integers(0, 2**31 - 1), m=st.integers(0, 4))
+def test_reach_clear_matches_its_loop_reference(seed, m):
+    from fov_marl.control.safety import reach_clear
 
     rng = np.random.default_rng(seed)
-    centre = rng.uniform(-8.0, 8.0, (3, m, 2))
-    radius = rng.uniform(0.0, 6.0, (3, m))
-    centre[rng.random((3, m)) < 0.1] = np.nan  # never detected
-    yaw = rng.uniform(-4.0, 4.0, 3)
-    got = reach_clear_bearings(centre, radius, yaw, k, 3.4)
-    np.testing.assert_array_equal(got, _reach_clear_reference(centre, radius, yaw, k, 3.4))
+    centre = rng.uniform(-12.0, 12.0, (5, m, 2))
+    radius = rng.uniform(0.0, 6.0, (5, m))
+    centre[rng.random((5, m)) < 0.1] = np.nan  # never detected
+    got = reach_clear(centre, radius, 3.4)
+    np.testing.assert_array_equal(got, _reach_clear_reference(centre, radius, 3.4))
 
 
 @settings(max_examples=80, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1))
-def test_reach_clear_bearings_keep_both_bins_around_every_reachable_point(seed):
-    """Wherever in a near disk the neighbour may stand, the two budget bearings around its
-    bearing (the bins whose rows bound the approach to it, Section 2e) stay counted, and
-    a bearing is cleared only if no point of a near disk lies within one bin of it."""
-    from fov_marl.control.safety import bearing_angles_body, reach_clear_bearings
+def test_reach_clear_only_where_no_reachable_point_is_within_the_horizon(seed):
+    """A robot is cleared only if no point of any neighbour's disk lies within H of it."""
+    from fov_marl.control.safety import reach_clear
 
     rng = np.random.default_rng(seed)
-    K, H = 24, 3.4
-    centre = rng.uniform(-7.0, 7.0, (1, 2, 2))
-    radius = rng.uniform(0.1, 4.0, (1, 2))
-    yaw = rng.uniform(-4.0, 4.0, 1)
-    clear = reach_clear_bearings(centre, radius, yaw, K, H)[0]
-    ang = bearing_angles_body(K, yaw)[0]
-    for j in range(2):
-        c, r = centre[0, j], radius[0, j]
-        if np.hypot(*c) - r > H:
-            continue
-        for _ in range(200):  # points of the disk
-            rho, phi = r * math.sqrt(rng.random()), rng.uniform(-math.pi, math.pi)
-            p = c + rho * np.array([math.cos(phi), math.sin(phi)])
-            if np.hypot(*p) < 1e-9:
-                continue
-            off = np.abs(np.angle(np.exp(1j * (ang - math.atan2(p[1], p[0])))))
-            assert not clear[off <= 2.0 * math.pi / K].any()
+    H = 3.4
+    centre = rng.uniform(-9.0, 9.0, (1, 3, 2))
+    radius = rng.uniform(0.0, 4.0, (1, 3))
+    if not reach_clear(centre, radius, H)[0]:
+        return
+    for j in range(3):
+        for _ in range(200):
+            rho, phi = radius[0, j] * math.sqrt(rng.random()), rng.uniform(-math.pi, math.pi)
+            p = centre[0, j] + rho * np.array([math.cos(phi), math.sin(phi)])
+            assert np.hypot(*p) > H
 
 
-def test_reach_clear_bearings_cases():
-    """No neighbour: every bearing clear; one never detected: none; a far disk: all; a
-    disk around the robot: none; a near disk: only the bearings away from it."""
-    from fov_marl.control.safety import bearing_angles_body, reach_clear_bearings
+def test_reach_clear_cases():
+    """No neighbour: clear; one never detected: not; a disk whose edge is beyond H: clear;
+    within H, or around the robot: not."""
+    from fov_marl.control.safety import reach_clear
 
-    K, H, yaw = 24, 3.4, np.zeros(1)
-    assert reach_clear_bearings(np.zeros((1, 0, 2)), np.zeros((1, 0)), yaw, K, H).all()
-    nan = np.full((1, 1, 2), np.nan)
-    assert not reach_clear_bearings(nan, np.zeros((1, 1)), yaw, K, H).any()
-    far = np.array([[[10.0, 0.0]]])
-    assert reach_clear_bearings(far, np.array([[6.5]]), yaw, K, H).all()  # edge 3.5 m > H
-    assert not reach_clear_bearings(far, np.array([[10.5]]), yaw, K, H).any()  # inside
-    near = reach_clear_bearings(far, np.array([[7.0]]), yaw, K, H)[0]  # edge 3 m: near
-    ang = np.abs(bearing_angles_body(K, yaw)[0])
-    half = math.asin(0.7) + 2.0 * math.pi / K  # 44.4° + 15°
-    np.testing.assert_array_equal(near, ang > half + 1e-12)
+    H = 3.4
+    assert reach_clear(np.zeros((1, 0, 2)), np.zeros((1, 0)), H).all()
+    assert not reach_clear(np.full((1, 1, 2), np.nan), np.zeros((1, 1)), H).any()
+    c = np.array([[[10.0, 0.0]], [[10.0, 0.0]], [[10.0, 0.0]], [[0.0, -10.0]]])
+    r = np.array([[6.5], [6.7], [12.0], [6.0]])  # edges 3.5, 3.3, inside, 4.0
+    np.testing.assert_array_equal(reach_clear(c, r, H), [True, False, False, True])
+    two = np.array([[[10.0, 0.0], [0.0, 3.0]]])  # one far, one near
+    assert not reach_clear(two, np.zeros((1, 2)), H)[0]

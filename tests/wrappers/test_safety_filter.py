@@ -284,15 +284,15 @@ def test_head_on_pair_at_a_coarse_control_period(dt, fov):
 def test_filter_changes_few_harmless_random_actions():
     """Random actions, N = 6, β = 120°, robots spread in the arena: the filter steps in
     only where a neighbour (seen, or believed) or a wall is near. The first version's
-    blanket motion cone changed 96% of them. Measured here: 49.2% with the shipped 0.5 m
-    blind travel budget, whose bearings no neighbour can reach count as looked at
-    (``blind_travel_reach``, safety Section 2f); 68.8% without that rule (per bearing, no
-    leak, no credit for backing away, the glance outranking the FoV levels: its turns
-    count), 67% per bearing with the 30 s leak and no glance, 50% with the single
-    vector's, 43% with the earlier 1 m; 36% with no budget at all. The issue's goal of 30%
-    is not met: the blind rows bound the speed towards the nearest particle of a belief,
-    and the budget still binds towards neighbours unseen for a few seconds (their disks
-    grow at v_max), see the wrapper's docstring."""
+    blanket motion cone changed 96% of them. Measured here: 58.8% with the shipped 0.5 m
+    blind travel budget, cleared while no neighbour can be near (``blind_travel_reach``,
+    safety Section 2f; 49.2% clearing per bearing, not kept); 68.8% without that rule
+    (per bearing, no leak, no credit for backing away, the glance outranking the FoV
+    levels: its turns count), 67% per bearing with the 30 s leak and no glance, 50% with
+    the single vector's, 43% with the earlier 1 m; 36% with no budget at all. The issue's
+    goal of 30% is not met: the blind rows bound the speed towards the nearest particle
+    of a belief, and the budget binds once a neighbour's reachable disk (growing at
+    v_max while it is unseen) comes near, see the wrapper's docstring."""
     env = SafetyFilterWrapper(fov_coverage_v0.parallel_env(n_agents=6, fov_deg=120.0))
     rng = np.random.default_rng(0)
     changed = total = 0
@@ -303,7 +303,7 @@ def test_filter_changes_few_harmless_random_actions():
             _, _, _, _, infos = env.step(acts)
             changed += sum(bool(safety_of(i)["intervened"]) for i in infos.values())
             total += len(infos)
-    assert changed / total <= 0.55, changed / total
+    assert changed / total <= 0.62, changed / total
 
 
 def test_commanded_velocity_is_the_one_the_robot_gets_at_a_wall():
@@ -412,10 +412,9 @@ def _drive_back(poses, reach, steps=20):
 
 def test_filter_lets_a_robot_back_away_where_no_neighbour_can_be():
     """Safety Section 2f: robot 0 backs away from its only neighbour, 14 m ahead (beyond
-    R_d, known start). No neighbour can be within H = D_s + 2 B + 2 v_max dt of any
-    bearing behind it, so those bearings count as looked at: the filter changes none of
-    its 20 steps (4 m back). Without the rule the 0.5 m budget turns it round to look
-    after 0.4 m."""
+    R_d, known start). That neighbour can be nowhere within H = D_s + 2 B + 2 v_max dt of
+    it, so every bearing counts as looked at: the filter changes none of its 20 steps
+    (4 m back). Without the rule the 0.5 m budget turns it round to look after 0.4 m."""
     poses = np.array([[20.0, 20.0, 0.0], [34.0, 20.0, math.pi]])
     xs, changed, _, pipe = _drive_back(poses, reach=True)
     assert changed == 0 and 20.0 - xs[-1] > 3.9  # 0.98 m/s: the env's unicycle
@@ -425,21 +424,35 @@ def test_filter_lets_a_robot_back_away_where_no_neighbour_can_be():
     assert pipe_off._bearing_travel.max() > 0.0
 
 
-def test_filter_still_budgets_the_approach_to_a_neighbour_that_can_be_near():
+def test_filter_still_budgets_a_robot_whose_neighbour_can_be_near():
     """The same robot with its neighbour 3.5 m behind it, unseen (each faces away): the
-    neighbour's reachable disk (0.2 m after one step) is near, so the bearings within one
-    bin of it (165-195°) keep the approach the first step made (0.18 m; the rows of its
-    belief stop the robot there), while the other bearings it backed towards (105-150°)
-    are cleared: they are budgeted without the rule. The pair never comes within D_s."""
+    neighbour's reachable disk is within H, so the budget counts as without the rule
+    (the same approach per bearing after a step); the pair never comes within D_s. And a
+    neighbour 14 m away whose disk has grown to H (10.2 s unseen at 1 m/s, the robot
+    standing) stops clearing the budget."""
     poses = np.array([[20.0, 20.0, 0.0], [16.5, 20.0, math.pi]])
     _, _, dmin, _ = _drive_back(poses, reach=True, steps=40)
     assert dmin >= 2.0
     (x1,), _, _, pipe = _drive_back(poses, reach=True, steps=1)
     _, _, _, pipe_off = _drive_back(poses, reach=False, steps=1)
-    c, c_off = pipe._bearing_travel[0], pipe_off._bearing_travel[0]
-    deg = 360.0 * np.arange(c.size) / c.size
-    toward = np.abs(deg - 180.0) <= 15.0
-    beside = (np.abs(deg - 180.0) >= 30.0) & (np.abs(deg - 180.0) <= 75.0)
-    np.testing.assert_allclose(c[toward], c_off[toward])
-    assert c[deg == 180.0][0] == pytest.approx(20.0 - x1, abs=1e-3)
-    assert np.all(c[beside] == 0.0) and np.all(c_off[beside] > 0.0)
+    c = pipe._bearing_travel[0]
+    np.testing.assert_array_equal(c, pipe_off._bearing_travel[0])
+    assert c.max() == pytest.approx(20.0 - x1, abs=1e-3) and c.max() > 0.1
+    # the far neighbour, unseen (robot 1 faces away, beyond R_d): clear until its disk,
+    # growing at v_max from the known start, reaches H = 2 + 1 + 0.4 = 3.4 m
+    env = SafetyFilterWrapper(
+        fov_coverage_v0.parallel_env(
+            n_agents=2, initial_poses=np.array([[20.0, 20.0, 0.0], [34.0, 20.0, 0.0]])
+        )
+    )
+    env.reset(seed=0)
+    pipe = env.pipeline
+    spin = {"robot_0": np.array([0.0, 0.0, 0.0], np.float32), "robot_1": np.zeros(3, np.float32)}
+    cleared = []
+    for _ in range(60):
+        pipe._bearing_travel[0] = 0.3  # as if spent: the rule zeroes it while it holds
+        env.step(spin)
+        cleared.append(bool(np.all(pipe._bearing_travel[0] == 0.0)))
+    first_kept = cleared.index(False)
+    assert all(cleared[:first_kept]) and not any(cleared[first_kept:])
+    assert (first_kept + 1) * 0.2 == pytest.approx(14.0 - 3.4, abs=0.21)
