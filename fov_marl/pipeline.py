@@ -433,21 +433,22 @@ class PfCbfPipeline:
         self._reach_base_m[rows] = np.where(det, r_z, self._reach_base_m[rows])
         self._reach_age_s[rows] = np.where(det, 0.0, self._reach_age_s[rows])
 
-    def _clear_reached(self, rows: np.ndarray) -> None:
+    def _clear_reached(self, rows: np.ndarray) -> np.ndarray:
         """Zero the whole budget of the ``rows`` no neighbour can be near
         (:func:`~fov_marl.control.safety.reach_clear`), with ``blind_travel_reach`` and
-        the budget per bearing."""
+        the budget per bearing. Returns the rows zeroed."""
         par, cfg = self.controller_params, self.config
         if not par.blind_travel_reach or self._bearing_travel.shape[1] == 0:
-            return
+            return rows[:0]
         if par.blind_travel_m <= 0.0:
-            return
+            return rows[:0]
         pose = self._own_pose[rows]
         centre = world_to_body(self._reach_world[rows], pose[:, None, :])
         radius = self._reach_base_m[rows] + cfg.v_max_mps * self._reach_age_s[rows]
         horizon = cfg.safety_distance_m + 2.0 * par.blind_travel_m + 2.0 * cfg.v_max_mps * cfg.dt_s
         clear = rows[reach_clear(centre, radius, horizon)]
         self._bearing_travel[clear] = 0.0
+        return clear
 
     def _last_seen_body(self) -> np.ndarray:
         """``(B N, N − 1, 2)`` the last-seen points in each robot's Σ_i (NaN: never seen)."""
