@@ -412,7 +412,7 @@ class PfCbfPipeline:
 
     def _update_reach(self) -> None:
         """Age the reachable disks by one step, take this step's detections, and clear
-        the bearings they leave free (safety Section 2f)."""
+        the budgets of the robots no neighbour can be near (safety Section 2f)."""
         self._reach_age_s += self.config.dt_s
         rows = np.arange(self.n_rows)
         self._take_reach_detections(rows)
