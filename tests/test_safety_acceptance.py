@@ -783,13 +783,16 @@ def test_filter_regressions_collide_without_the_new_rows(episode, off):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("fov_deg, bound", [(120.0, 0.93), (360.0, 0.45)])
+@pytest.mark.parametrize("fov_deg, bound", [(120.0, 0.91), (360.0, 0.45)])
 def test_filter_random_actions_long_episodes_change_rate_is_reported(fov_deg, bound):
     """Random actions behind the filter, N = 6, 5 episodes x 1000 steps: no collision, and
     the share of changed robot-steps stays below what was measured with the shipped
-    filter. At β = 120°: 0.86-0.97, mean 0.905 with the budget per bearing, no leak and
-    the glance (0.84-0.88, mean 0.854, with the single vector; 0.845 with the earlier 1 m
-    budget); 0.72 over 2 x 150 steps. It grows with the time the beliefs go unrefreshed.
+    filter. At β = 120°: 0.83-0.91, mean 0.879, with the budget cleared while no neighbour
+    can be near (``blind_travel_reach``; 0.86-0.93, mean 0.895, without it, ``fov-marl
+    evaluate --policy random --safety-filter --episodes 5``); 0.86-0.97, mean 0.905, when
+    measured first with the budget per bearing, no leak and the glance (0.84-0.88, mean
+    0.854, with the single vector; 0.845 with the earlier 1 m budget); 0.59 over 2 x 150
+    steps. It grows with the time the beliefs go unrefreshed.
     At β = 360°: 0.32-0.41, mean 0.386, mostly from the Gaussian half-planes of neighbours
     beyond R_d. The issue's goal of 0.30 is not met. The neighbour rows of diffuse
     beliefs, the blind rows and the blind travel budget do most of it;
