@@ -133,7 +133,8 @@ field                        default   source / reason
                                        reached since its last detection, at v_max),
                                        every bearing counts as looked at (safety
                                        Section 2f, :func:`~fov_marl.control.safety.
-                                       reach_clear`); True for the safety filter
+                                       reach_clear`); opt-in (measured trade-off
+                                       there)
 ``look_yields_fov``          False     while the look before the leap turns the robot
                                        (:meth:`~fov_marl.pipeline.PfCbfPipeline.
                                        _look_before_leap`), its FoV levels are left

@@ -399,14 +399,17 @@ the budget starts counting again every neighbour is at least ``H − 2 v_max dt 
 2 B`` away, and after the robot and the neighbour each spend their budget B towards
 each other the pair is still D_s apart (a look promises contact only, ``D_s − 2 B =
 2 r``). A robot whose neighbours were seen recently and far away no longer spends its
-budget, nor glances, for nothing. On in the safety filter, off in pfcbf (whose sweeps
-were measured without it).
+budget, nor glances, for nothing. Off by default (in pfcbf, whose sweeps were measured
+without it, and in the safety filter, where the shipped learned policy, trained without
+it, lost its final-η lead over pfcbf with it: :mod:`fov_marl.wrappers.safety_filter`);
+the filter's sweeps with it on are in the CHANGELOG.
 
 Clearing per bearing instead (every bearing more than ``asin(r_j / d_j)`` plus a bin
 off every near disk) was tried and not kept: it changed fewer random actions (49%
 against 59%, N = 6, β = 120°, 2 x 150 steps) but pfcbf behind the filter settled worse
 (N = 6, β = 120°, seeds 0-19, 1000 steps: final η 0.9933 against 0.9954 without the
-rule, 4 seeds below 0.99; with this rule 0.9955, all 20 at 0.99), and it rests on the
+rule, 4 seeds below 0.99, mean time to settle 158 s against 110 s; with this rule 0.9955,
+all 20 above 0.99, 135 s), and it rests on the
 bins' caveat of Section 2e (a neighbour moving sideways into a bearing cleared while it
 stood elsewhere meets a fresh budget there), which this rule does not.
 

@@ -758,12 +758,12 @@ def test_filtered_robots_never_step_further_than_the_budget_into_an_unseen_beari
     """The red team's episode (random actions, N = 3, β = 120°, 20 m arena, seed 0): no
     step moves a robot more than B (+ the arc's curvature) towards a bearing outside the
     view it had at the step's start (before: 0.71-0.995 m with B = 0.5 m), on the budget
-    alone (``blind_travel_reach`` off). With it (the filter's default, safety Section 2f)
+    alone (``blind_travel_reach`` off, the default). With it (safety Section 2f)
     a longer blind step goes only where no neighbour can be: no step approaches a
     neighbour out of view and within H = D_s + 2 B + 2 v_max dt by more than B (over the
     bins' spacing, 1/cos 7.5°; at v_max dt = 1 m some blind steps are 0.56 m)."""
     assert _worst_blind_step(v_max, dt, {"blind_travel_reach": False})[0] <= 0.5 + 0.05
-    _, approach = _worst_blind_step(v_max, dt)
+    _, approach = _worst_blind_step(v_max, dt, {"blind_travel_reach": True})
     assert approach <= 0.5 / math.cos(math.pi / 24) + 0.05
 
 

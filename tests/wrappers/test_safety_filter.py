@@ -281,19 +281,23 @@ def test_head_on_pair_at_a_coarse_control_period(dt, fov):
         assert rec.collisions == 0, rec
 
 
-def test_filter_changes_few_harmless_random_actions():
+@pytest.mark.parametrize("reach, bound", [(False, 0.72), (True, 0.62)])
+def test_filter_changes_few_harmless_random_actions(reach, bound):
     """Random actions, N = 6, β = 120°, robots spread in the arena: the filter steps in
     only where a neighbour (seen, or believed) or a wall is near. The first version's
-    blanket motion cone changed 96% of them. Measured here: 58.8% with the shipped 0.5 m
-    blind travel budget, cleared while no neighbour can be near (``blind_travel_reach``,
-    safety Section 2f; 49.2% clearing per bearing, not kept); 68.8% without that rule
-    (per bearing, no leak, no credit for backing away, the glance outranking the FoV
-    levels: its turns count), 67% per bearing with the 30 s leak and no glance, 50% with
-    the single vector's, 43% with the earlier 1 m; 36% with no budget at all. The issue's
-    goal of 30% is not met: the blind rows bound the speed towards the nearest particle
-    of a belief, and the budget binds once a neighbour's reachable disk (growing at
-    v_max while it is unseen) comes near, see the wrapper's docstring."""
-    env = SafetyFilterWrapper(fov_coverage_v0.parallel_env(n_agents=6, fov_deg=120.0))
+    blanket motion cone changed 96% of them. Measured here: 68.8% with the shipped 0.5 m
+    blind travel budget (per bearing, no leak, no credit for backing away, the glance
+    outranking the FoV levels: its turns count); 58.8% with the option that clears it
+    while no neighbour can be near (``blind_travel_reach``, safety Section 2f; 49.2%
+    clearing per bearing, not kept); 67% per bearing with the 30 s leak and no glance,
+    50% with the single vector's, 43% with the earlier 1 m; 36% with no budget at all. The
+    issue's goal of 30% is not met: the blind rows bound the speed towards the nearest
+    particle of a belief, and the budget binds towards neighbours unseen for a few
+    seconds, see the wrapper's docstring."""
+    env = SafetyFilterWrapper(
+        fov_coverage_v0.parallel_env(n_agents=6, fov_deg=120.0),
+        controller_params={"blind_travel_reach": reach},
+    )
     rng = np.random.default_rng(0)
     changed = total = 0
     for seed in range(2):
@@ -303,7 +307,7 @@ def test_filter_changes_few_harmless_random_actions():
             _, _, _, _, infos = env.step(acts)
             changed += sum(bool(safety_of(i)["intervened"]) for i in infos.values())
             total += len(infos)
-    assert changed / total <= 0.62, changed / total
+    assert changed / total <= bound, changed / total
 
 
 def test_commanded_velocity_is_the_one_the_robot_gets_at_a_wall():
@@ -443,7 +447,8 @@ def test_filter_still_budgets_a_robot_whose_neighbour_can_be_near():
     env = SafetyFilterWrapper(
         fov_coverage_v0.parallel_env(
             n_agents=2, initial_poses=np.array([[20.0, 20.0, 0.0], [34.0, 20.0, 0.0]])
-        )
+        ),
+        controller_params={"blind_travel_reach": True},
     )
     env.reset(seed=0)
     pipe = env.pipeline
