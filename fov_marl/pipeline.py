@@ -224,11 +224,15 @@ class PfCbfPipeline:
         self._blind_travel_world = np.zeros((R, 2))
         #: approach per world bearing since the camera last looked at it (Section 2e)
         self._bearing_travel = np.zeros((R, self.controller_params.blind_travel_bearings))
-        #: the neighbours' reachable disks (Section 2f): centre at the last detection
-        #: (world, NaN: never detected), its radius then (m) and the time since (s)
+        #: the neighbours' reachable disks (Section 2f), kept only with
+        #: ``blind_travel_reach``: centre at the last detection (world, NaN: never
+        #: detected) and its radius then (m); the time since is the tracker's
+        par = self.controller_params
+        self._reach_on = bool(
+            par.blind_travel_reach and par.blind_travel_bearings > 0 and par.blind_travel_m > 0
+        )
         self._reach_world = np.full((R, m, 2), np.nan)
         self._reach_base_m = np.zeros((R, m))
-        self._reach_age_s = np.zeros((R, m))
         self.counters = {"interventions": 0, "fallbacks": 0, "safety_fallbacks": 0}
 
     # ------------------------------------------------------------------ views
@@ -399,9 +403,10 @@ class PfCbfPipeline:
     def _reset_reach(self, rows: np.ndarray, init: np.ndarray | None) -> None:
         """Start the reachable disks of ``rows`` (safety Section 2f): the known start poses
         ``init (B, N, 3)`` are exact detections at t = 0; then this step's detections."""
+        if not self._reach_on:
+            return
         self._reach_world[rows] = np.nan
         self._reach_base_m[rows] = 0.0
-        self._reach_age_s[rows] = 0.0
         if init is not None:
             copy = rows // self.n
             self._reach_world[rows] = np.asarray(init, dtype=np.float64)[
@@ -413,7 +418,8 @@ class PfCbfPipeline:
     def _update_reach(self) -> None:
         """Age the reachable disks by one step, take this step's detections, and clear
         the budgets of the robots no neighbour can be near (safety Section 2f)."""
-        self._reach_age_s += self.config.dt_s
+        if not self._reach_on:
+            return
         rows = np.arange(self.n_rows)
         self._take_reach_detections(rows)
         self._clear_reached(rows)
@@ -431,20 +437,16 @@ class PfCbfPipeline:
         r_z = cfg.meas_noise_clip_sigma * math.hypot(*cfg.meas_std[:2]) + 1e-3
         self._reach_world[rows] = np.where(det[..., None], zw, self._reach_world[rows])
         self._reach_base_m[rows] = np.where(det, r_z, self._reach_base_m[rows])
-        self._reach_age_s[rows] = np.where(det, 0.0, self._reach_age_s[rows])
 
     def _clear_reached(self, rows: np.ndarray) -> np.ndarray:
         """Zero the whole budget of the ``rows`` no neighbour can be near
-        (:func:`~fov_marl.control.safety.reach_clear`), with ``blind_travel_reach`` and
-        the budget per bearing. Returns the rows zeroed."""
+        (:func:`~fov_marl.control.safety.reach_clear`; called only with
+        ``blind_travel_reach`` and a budget per bearing). Returns the rows zeroed."""
         par, cfg = self.controller_params, self.config
-        if not par.blind_travel_reach or self._bearing_travel.shape[1] == 0:
-            return rows[:0]
-        if par.blind_travel_m <= 0.0:
-            return rows[:0]
         pose = self._own_pose[rows]
         centre = world_to_body(self._reach_world[rows], pose[:, None, :])
-        radius = self._reach_base_m[rows] + cfg.v_max_mps * self._reach_age_s[rows]
+        age = self._est["time_since_seen_s"][rows]  # the tracker's, from the same slots
+        radius = self._reach_base_m[rows] + cfg.v_max_mps * age
         horizon = cfg.safety_distance_m + 2.0 * par.blind_travel_m + 2.0 * cfg.v_max_mps * cfg.dt_s
         clear = rows[reach_clear(centre, radius, horizon)]
         self._bearing_travel[clear] = 0.0
