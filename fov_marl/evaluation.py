@@ -46,11 +46,10 @@ from fov_marl.metrics import optimal_eta, time_to_eta
 from fov_marl.validation import (
     check_bool,
     check_int,
-    check_keys,
     check_real,
     check_seed,
+    check_wrapper_kwargs,
     describe,
-    keyword_parameters,
 )
 
 __all__ = [
@@ -111,24 +110,11 @@ def make_env(
 def _check_filter_kwargs(value: Any, safety_filter: bool) -> dict[str, Any]:
     """``safety_filter_kwargs``: None or a dict of :class:`SafetyFilterWrapper` keywords
     (their values are the filter's to check), non-empty only with the filter."""
-    if value is None:
-        return {}
-    if not isinstance(value, Mapping):
-        raise ValueError(
-            f"safety_filter_kwargs must be a dict of SafetyFilterWrapper keywords or None, "
-            f"got {describe(value)}"
-        )
     from fov_marl.wrappers import SafetyFilterWrapper
 
-    valid = keyword_parameters(SafetyFilterWrapper.__init__, skip=2)
-    if valid is not None:
-        check_keys("safety_filter_kwargs", value, valid)
-    if value and not safety_filter:
-        raise ValueError(
-            f"safety_filter_kwargs {sorted(value)} need safety_filter=True (they configure "
-            "the filter)"
-        )
-    return dict(value)
+    return check_wrapper_kwargs(
+        "safety_filter_kwargs", value, SafetyFilterWrapper, on=safety_filter
+    )
 
 
 @dataclass

@@ -59,6 +59,7 @@ __all__ = [
     "MAX_SEED",
     "check_out_file",
     "check_params",
+    "check_wrapper_kwargs",
 ]
 
 
@@ -356,6 +357,37 @@ def keyword_parameters(fn: Any, skip: int = 1) -> tuple[str, ...] | None:
     if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
         return None
     return tuple(p.name for p in params if p.kind is not inspect.Parameter.VAR_POSITIONAL)
+
+
+def check_wrapper_kwargs(
+    name: str, value: Any, cls: type, *, on: bool = True, switch: str = "safety_filter"
+) -> dict[str, Any]:
+    """Keyword options of a wrapper given as a dict, e.g. ``safety_filter_kwargs``.
+
+    ``value`` must be None or a dict whose keys are parameters of ``cls.__init__`` after
+    ``self`` and the env (the message lists them; their values are the wrapper's to
+    check), and may be non-empty only while the wrapper is on (``on``): options of a
+    wrapper that is off would be silently ignored, so they are an error naming
+    ``switch``.
+
+    Returns:
+        A plain dict of the options (``{}`` for None).
+    """
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise ConfigError(
+            f"{name} must be a dict of {cls.__name__} keywords or None, got {describe(value)}"
+        )
+    valid = keyword_parameters(cls.__init__, skip=2)
+    if valid is not None:
+        check_keys(name, value, valid)
+    if value and not on:
+        raise ConfigError(
+            f"{name} {sorted(map(str, value))} need {switch}=True (they configure "
+            f"{cls.__name__}, which is off)"
+        )
+    return dict(value)
 
 
 def fov_parallel_base(name: str, env: Any, vector_hint: str = "") -> Any:

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -32,9 +32,9 @@ from fov_marl.validation import (
     check_choice,
     check_int,
     check_out_file,
+    check_wrapper_kwargs,
     check_writable,
     describe,
-    keyword_parameters,
 )
 
 __all__ = [
@@ -232,25 +232,10 @@ def _check_policy(policy: Any) -> str:
 def _check_filter_kwargs(value: Any, on: bool) -> dict[str, Any] | None:
     """``safety_filter_kwargs``: None or a dict of
     :class:`~fov_marl.wrappers.SafetyFilterWrapper` keywords (the message lists them),
-    given only with the filter on."""
-    if value is None:
-        return None
-    if not isinstance(value, Mapping):
-        raise ConfigError(f"safety_filter_kwargs must be a dict or None, got {describe(value)}")
+    given only with the filter on (:func:`~fov_marl.validation.check_wrapper_kwargs`)."""
     from fov_marl.wrappers import SafetyFilterWrapper
 
-    valid = keyword_parameters(SafetyFilterWrapper.__init__, skip=2)  # after self and env
-    unknown = sorted(str(k) for k in value if valid is not None and k not in valid)
-    if unknown:
-        raise ConfigError(
-            f"unknown safety_filter_kwargs key(s) {unknown}; valid keys are {sorted(valid or ())}"
-        )
-    if value and not on:  # set, but the filter is off: it would be silently ignored
-        raise ConfigError(
-            f"safety_filter_kwargs needs safety_filter=True, got {dict(value)!r} with the "
-            "filter off"
-        )
-    return dict(value) or None
+    return check_wrapper_kwargs("safety_filter_kwargs", value, SafetyFilterWrapper, on=on) or None
 
 
 class _DrawAfterReset:

@@ -52,10 +52,13 @@ def no_episode(monkeypatch):
         ({"n_agents": 0}, "n_agents"),
         (
             {"safety_filter": True, "safety_filter_kwargs": {"foo": 1}},
-            "unknown safety_filter_kwargs key(s) ['foo']; valid keys are [",
+            "unknown safety_filter_kwargs ['foo']; valid safety_filter_kwargs are [",
         ),
         ({"safety_filter": True, "safety_filter_kwargs": 3}, "safety_filter_kwargs must be a dict"),
-        ({"safety_filter_kwargs": {"init": "known"}}, "safety_filter_kwargs needs safety_filter"),
+        (
+            {"safety_filter_kwargs": {"init": "known"}},
+            "safety_filter_kwargs ['init'] need safety_filter=True",
+        ),
     ],
 )
 def test_bad_arguments_are_value_errors_before_the_episode(kwargs, says, tmp_path, no_episode):

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from fov_marl.validation import describe, keyword_parameters
+from fov_marl.validation import check_wrapper_kwargs, describe
 
 __all__ = ["SCENARIOS", "make_parallel_env", "require"]
 
@@ -47,26 +47,18 @@ def make_parallel_env(
     for name, flag in (("safety_filter", safety_filter), ("belief", belief)):
         if not isinstance(flag, bool):
             raise ValueError(f"{name} must be True or False, got {describe(flag)}")
-    for name, kw, flag, on, cls in (
-        ("filter_kwargs", filter_kwargs, "safety_filter", safety_filter, SafetyFilterWrapper),
-        ("belief_kwargs", belief_kwargs, "belief", belief, BeliefObservationWrapper),
-    ):
-        if kw is None:
-            continue
-        if not isinstance(kw, Mapping):
-            raise ValueError(f"{name} must be a dict or None, got {describe(kw)}")
-        if kw and not on:  # set, but the wrapper is off: it would be silently ignored
-            raise ValueError(f"{name} needs {flag}=True, got {dict(kw)!r} with {flag}=False")
-        valid = keyword_parameters(cls.__init__, skip=2)  # after self and env
-        unknown = sorted(str(k) for k in kw if k not in valid)
-        if unknown:
-            raise ValueError(f"unknown {name} key(s) {unknown}; valid keys are {sorted(valid)}")
+    filter_kwargs = check_wrapper_kwargs(
+        "filter_kwargs", filter_kwargs, SafetyFilterWrapper, on=safety_filter
+    )
+    belief_kwargs = check_wrapper_kwargs(
+        "belief_kwargs", belief_kwargs, BeliefObservationWrapper, on=belief, switch="belief"
+    )
     module = fov_coverage_v0 if scenario == "coverage" else fov_crossing_v0
     env = module.parallel_env(render_mode=render_mode, **config)
     if safety_filter:
-        env = SafetyFilterWrapper(env, **dict(filter_kwargs or {}))
+        env = SafetyFilterWrapper(env, **filter_kwargs)
     if belief:
-        env = BeliefObservationWrapper(env, **dict(belief_kwargs or {}))
+        env = BeliefObservationWrapper(env, **belief_kwargs)
     return env
 
 

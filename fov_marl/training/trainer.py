@@ -144,6 +144,7 @@ from fov_marl.validation import (
     check_keys,
     check_out_dir,
     check_real,
+    check_wrapper_kwargs,
     describe,
     is_integer,
 )
@@ -629,27 +630,6 @@ def _check_buffer(algo: str, hp: dict[str, Any], n_slots: int, obs_dim: int, act
         )
 
 
-def _check_wrapper_kwargs(
-    safety_filter_kwargs: dict[str, Any] | None, belief_kwargs: dict[str, Any] | None
-) -> None:
-    """Wrapper keywords must be parameters of the wrappers (their values are checked by
-    the wrappers themselves when the probe env is built)."""
-    import inspect
-
-    from fov_marl.wrappers import SafetyFilterWrapper
-    from fov_marl.wrappers.belief import BeliefObservationWrapper
-
-    for name, kw, cls in (
-        ("safety_filter_kwargs", safety_filter_kwargs, SafetyFilterWrapper),
-        ("belief_kwargs", belief_kwargs, BeliefObservationWrapper),
-    ):
-        if kw:
-            valid = [
-                p for p in inspect.signature(cls.__init__).parameters if p not in ("self", "env")
-            ]
-            check_keys(f"{name} keys", kw, valid)
-
-
 def _merged_hyperparams(algo: str, overrides: dict[str, Any] | None) -> dict[str, Any]:
     hp = copy.deepcopy(DEFAULT_HYPERPARAMS[algo])
     for key, value in (overrides or {}).items():
@@ -876,14 +856,17 @@ def train(
         train_max_cycles = check_int("train_max_cycles", train_max_cycles, 1, note="(or None)")
     out = check_out_dir("out_dir", out_dir)
     overrides = validate_hyperparams(algo, hyperparams)
-    for name, value in (
-        ("env_kwargs", env_kwargs),
-        ("safety_filter_kwargs", safety_filter_kwargs),
-        ("belief_kwargs", belief_kwargs),
-    ):
-        if value is not None and not isinstance(value, dict):
-            raise ConfigError(f"{name} must be a dict or None, got {describe(value)}")
-    _check_wrapper_kwargs(safety_filter_kwargs, belief_kwargs)
+    if env_kwargs is not None and not isinstance(env_kwargs, dict):
+        raise ConfigError(f"env_kwargs must be a dict or None, got {describe(env_kwargs)}")
+    from fov_marl.wrappers import SafetyFilterWrapper
+    from fov_marl.wrappers.belief import BeliefObservationWrapper
+
+    safety_filter_kwargs = check_wrapper_kwargs(
+        "safety_filter_kwargs", safety_filter_kwargs, SafetyFilterWrapper, on=bool(safety_filter)
+    )
+    belief_kwargs = check_wrapper_kwargs(
+        "belief_kwargs", belief_kwargs, BeliefObservationWrapper, on=bool(belief), switch="belief"
+    )
 
     env_kwargs = dict(env_kwargs or {})
     train_kwargs = dict(env_kwargs)

@@ -236,6 +236,14 @@ def test_invalid_arguments_raise_value_error(tmp_path):
         ({"train_max_cycles": 0}, "train_max_cycles"),
         ({"workers": 3}, r"workers must be .*\[1, 2\]"),
         ({"workers": 2, "belief": True}, "workers = 2 needs the vector env"),
+        # options of a wrapper that is off were silently ignored before
+        ({"safety_filter_kwargs": {"init": "uniform"}}, r"\['init'\] need safety_filter=True"),
+        ({"belief_kwargs": {"init": "uniform"}}, r"\['init'\] need belief=True"),
+        (
+            {"safety_filter": True, "safety_filter_kwargs": {"zzz": 1}},
+            r"unknown safety_filter_kwargs \['zzz'\]; valid .*controller_params",
+        ),
+        ({"safety_filter_kwargs": 3}, "safety_filter_kwargs must be a dict"),
     ):
         with pytest.raises(ValueError, match=match):
             _train(tmp_path, **kw)
