@@ -212,7 +212,6 @@ class PfCbfPipeline:
         ids = np.array([lay.neighbour_ids for lay in self.layouts]).reshape(self.n, m)
         self._ids = np.tile(ids, (self.n_copies, 1))
         self._agent_of_row = np.tile(np.arange(self.n), self.n_copies)
-        self._cue = slice(SLOT_SIZE * m, SLOT_SIZE * m + CUE_SIZE)
         self._obs_size = SLOT_SIZE * m + CUE_SIZE
         self.last_results: Sequence[ControlResult | None] = _LazyResults(None, R)
         self.last_batch: BatchControlResult | None = None
@@ -283,22 +282,17 @@ class PfCbfPipeline:
 
     def _read_cues(self, obs_m: np.ndarray, rows: np.ndarray | None = None) -> None:
         o = obs_m if rows is None else obs_m[rows]
-        m = self.n - 1
-        slots = o[:, : SLOT_SIZE * m].reshape(o.shape[0], m, SLOT_SIZE)
+        lay = self.layouts[0]  # the slots and the cue are where they are for every robot
+        det, p_body, _ = lay.slot_arrays(o)
         # the camera's own report in Σ_i (safety Section 1d); NaN: not detected
-        z = np.where((slots[..., 0] > 0.5)[..., None], slots[..., 1:3], np.nan)
+        z = np.where(det[..., None], p_body, np.nan)
+        at = slice(None) if rows is None else rows
         if rows is None:
-            self._detection_body = z.astype(np.float64)
+            self._detection_body = z
         else:
             self._detection_body[rows] = z
-        c = obs_m[:, self._cue] if rows is None else obs_m[rows, self._cue]
-        pose = np.stack([c[:, 0], c[:, 1], np.arctan2(c[:, 3], c[:, 2])], -1)
-        if rows is None:
-            self._own_pose[:] = pose
-            self._goal_body[:] = c[:, 4:6]
-        else:
-            self._own_pose[rows] = pose
-            self._goal_body[rows] = c[:, 4:6]
+        self._own_pose[at] = lay.own_pose_world(o)
+        self._goal_body[at] = lay.goal_body(o)
 
     # ------------------------------------------------------------------ episode
     def reset(

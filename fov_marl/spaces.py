@@ -120,12 +120,25 @@ class ObservationLayout:
         return slice(SLOT_SIZE * self.n_slots, self.size)
 
     def slots(self, obs: np.ndarray) -> np.ndarray:
-        """``(N − 1, 5)`` view of the neighbour slots of ``obs``."""
-        return np.asarray(obs)[: SLOT_SIZE * self.n_slots].reshape(self.n_slots, SLOT_SIZE)
+        """``(..., N − 1, 5)`` view of the neighbour slots of ``obs`` ``(..., size)``."""
+        obs = np.asarray(obs)
+        m = self.n_slots
+        return obs[..., : SLOT_SIZE * m].reshape(*obs.shape[:-1], m, SLOT_SIZE)
 
     def cue(self, obs: np.ndarray) -> np.ndarray:
-        """``(7,)`` own cue of ``obs``."""
-        return np.asarray(obs)[self.cue_slice]
+        """``(..., 7)`` own cue of ``obs`` ``(..., size)``."""
+        return np.asarray(obs)[..., self.cue_slice]
+
+    def slot_arrays(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every slot of ``obs`` ``(..., size)`` as arrays (the batched :meth:`decode`).
+
+        Returns:
+            ``detected`` ``(..., N − 1)`` bool, ``p_body`` ``(..., N − 1, 2)`` measured
+            positions in Σ_i (m) and ``yaw_rel_rad`` ``(..., N − 1)`` measured θ_j − θ_i
+            (rad), float64; an undetected slot holds the env's zeros (its yaw is 0).
+        """
+        s = self.slots(obs).astype(np.float64)
+        return s[..., 0] > 0.5, s[..., 1:3], np.arctan2(s[..., 4], s[..., 3])
 
     def decode(self, obs: np.ndarray) -> Detections:
         """Detections contained in one observation vector.
@@ -139,22 +152,18 @@ class ObservationLayout:
                 f"observation of robot_{self.agent_index} must have shape ({self.size},), "
                 f"got {obs.shape}"
             )
-        s = self.slots(obs).astype(np.float64)
-        det = s[:, 0] > 0.5
-        return Detections(
-            ids=self.neighbour_ids[det],
-            p_body=s[det, 1:3],
-            yaw_rel_rad=np.arctan2(s[det, 4], s[det, 3]),
-        )
+        det, p_body, yaw = self.slot_arrays(obs)
+        return Detections(ids=self.neighbour_ids[det], p_body=p_body[det], yaw_rel_rad=yaw[det])
 
     def own_pose_world(self, obs: np.ndarray) -> np.ndarray:
-        """``(3,)`` the robot's own world pose ``[x m, y m, yaw rad]`` from its cue."""
+        """``(..., 3)`` the robot's own world pose ``[x m, y m, yaw rad]`` from its cue
+        (``obs`` ``(..., size)``)."""
         c = self.cue(obs).astype(np.float64)
-        return np.array([c[0], c[1], np.arctan2(c[3], c[2])])
+        return np.stack([c[..., 0], c[..., 1], np.arctan2(c[..., 3], c[..., 2])], -1)
 
     def goal_body(self, obs: np.ndarray) -> np.ndarray:
-        """``(2,)`` q_m (coverage) or the own target (crossing) in Σ_i (m)."""
-        return self.cue(obs)[4:6].astype(np.float64)
+        """``(..., 2)`` q_m (coverage) or the own target (crossing) in Σ_i (m)."""
+        return self.cue(obs)[..., 4:6].astype(np.float64)
 
 
 def action_to_velocity(

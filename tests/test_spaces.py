@@ -119,6 +119,34 @@ def test_decode_round_trip_property(layout_case, x, y, th):
     np.testing.assert_allclose(dth, 0.0, atol=1e-6)
 
 
+@given(
+    st.integers(1, 8),
+    st.integers(1, 4),
+    st.integers(0, 2**32 - 1),
+)
+def test_batched_slots_and_cue_equal_the_per_row_decode(n, rows, seed):
+    """The (..., size) forms the tracker and the pipeline read every robot with are, row
+    by row, :meth:`decode`, :meth:`own_pose_world` and :meth:`goal_body`, bit for bit."""
+    rng = np.random.default_rng(seed)
+    lay = ObservationLayout(n, 0)
+    obs = rng.normal(size=(2, rows, lay.size)).astype(np.float32)
+    obs[..., : SLOT_SIZE * (n - 1) : SLOT_SIZE] = rng.integers(0, 2, (2, rows, n - 1))
+    det, p_body, yaw = lay.slot_arrays(obs)
+    pose = lay.own_pose_world(obs)
+    goal = lay.goal_body(obs)
+    assert det.shape == (2, rows, n - 1) and p_body.shape == (2, rows, n - 1, 2)
+    assert pose.shape == (2, rows, 3) and goal.shape == (2, rows, 2)
+    for b in range(2):
+        for r in range(rows):
+            one = lay.decode(obs[b, r])
+            assert lay.neighbour_ids[det[b, r]].tolist() == one.ids.tolist()
+            assert np.array_equal(p_body[b, r][det[b, r]], one.p_body)
+            assert np.array_equal(yaw[b, r][det[b, r]], one.yaw_rel_rad)
+            assert np.array_equal(pose[b, r], lay.own_pose_world(obs[b, r]))
+            assert np.array_equal(goal[b, r], lay.goal_body(obs[b, r]))
+            assert np.array_equal(pose[b, r, :2], obs[b, r, lay.cue_slice][:2].astype(np.float64))
+
+
 # ----------------------------------------------------------------------------- actions
 def test_action_to_velocity_known_values():
     v, w = action_to_velocity(np.array([0.5, -0.25, 1.0]), V_MAX, W_MAX)

@@ -285,6 +285,7 @@ class _BankCore:
         # particles held per row: P_T, or none without a neighbour (N = 1)
         self._P = int(params.n_particles_total) if m else 0
         lays = [ObservationLayout(n, int(a)) for a in agent_indices]
+        self._layout = ObservationLayout(n, 0)  # decodes every row: slots need only N
         self._ids = np.stack([lay.neighbour_ids for lay in lays]).reshape(self._R, m)
         model = params.motion_model
         self._model = "mixture" if model == "auto" else model
@@ -326,19 +327,14 @@ class _BankCore:
         self.n_recoveries_deleted = np.zeros(self._R, dtype=np.int64)
 
     def _parse(self, obs: np.ndarray):
-        m, r = self._M, self._R
-        slots = obs[:, : SLOT_SIZE * m].reshape(r, m, SLOT_SIZE)
-        cue = obs[:, SLOT_SIZE * m : SLOT_SIZE * m + CUE_SIZE]
-        det = slots[..., 0] > 0.5
-        zx = slots[..., 1]
-        zy = slots[..., 2]
-        zh = np.arctan2(slots[..., 4], slots[..., 3])
-        pose = np.stack([cue[:, 0], cue[:, 1], np.arctan2(cue[:, 3], cue[:, 2])], -1)
+        lay = self._layout
+        det, z, zh = lay.slot_arrays(obs)
+        pose = lay.own_pose_world(obs)
         if self.config.scenario == "coverage":
-            goal = cue[:, 4:6].copy()
+            goal = lay.goal_body(obs)
         else:
             goal = world_to_body(self._q_m[None, :], pose)
-        return det, zx, zy, zh, pose, goal
+        return det, z[..., 0], z[..., 1], zh, pose, goal
 
     def reset(self, obs_arr: np.ndarray, init: np.ndarray | None) -> None:
         """Eq. 1 (``init`` (N, 3) or, per copy, (B, N, 3) known world poses, or None:
