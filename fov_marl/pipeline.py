@@ -78,8 +78,10 @@ Estimates = Literal["tracker", "oracle"]
 Controller = Literal["auto", "batched", "loop"]
 #: the FoV rows (left, right, range) among each neighbour's four rows
 _FOV_ROW_COLS = np.array([k for k in range(4) if k != SAFETY_ROW])
-#: look-before-leap turns a robot once its budget is this spent (fraction of B)
-_LOOK_FRACTION = 0.75
+#: slack (m) of the look before the leap's trigger ``c ≥ look_fraction · B``: the
+#: budget is booked from the float32 actions the robots applied, so a bearing the QP
+#: spent exactly may read a hair below B
+_LOOK_SLACK_M = 1e-6
 #: ``controller="auto"`` uses the batched controller from this many env copies on: from
 #: one, since its QPs are solved by the per-robot solver's NNLS (:mod:`fov_marl.control.batch_qp`)
 #: and everything around them runs on the team's arrays. Measured (pfcbf, the paper's
@@ -223,6 +225,9 @@ class PfCbfPipeline:
         self._blind_travel_world = np.zeros((R, 2))
         #: approach per world bearing since the camera last looked at it (Section 2e)
         self._bearing_travel = np.zeros((R, self.controller_params.blind_travel_bearings))
+        # the look before the leap's memory: u*'s translation bearing at the last step
+        # (rad, Σ_w; NaN: none), read with look_persistence_deg
+        self._look_prev_world = np.full(R, np.nan)
         #: the neighbours' reachable disks (Section 2f), kept only with
         #: ``blind_travel_reach``: centre at the last detection (world, NaN: never
         #: detected) and its radius then (m); the time since is the tracker's
@@ -367,6 +372,7 @@ class PfCbfPipeline:
         vector (``blind_travel_bearings = 0``, an ablation) has no per-bearing state and
         starts at zero either way.
         """
+        self._look_prev_world[rows] = np.nan
         K = self._bearing_travel.shape[1]
         unknown = self.init == "uniform" and self.estimates == "tracker"
         spent = self.controller_params.blind_travel_m if unknown else 0.0
@@ -683,7 +689,8 @@ class PfCbfPipeline:
     def _look_before_leap(self, u_star: np.ndarray) -> np.ndarray:
         """Turn a robot that has spent most of its blind travel budget towards it.
 
-        Where ``‖e‖ ≥ ¾ B`` (:func:`fov_marl.control.safety.blind_travel_step`) and u*
+        Where ``‖e‖ ≥ f B − 1 µm`` (f = ``look_fraction``, ¾ by default, 1 in the safety
+        filter; :func:`fov_marl.control.safety.blind_travel_step`) and u*
         still translates along ``e``, u*'s yaw rate becomes ``sat(look_gain · φ_e)``,
         φ_e the bearing of ``e`` in Σ_i: the robot looks where it has been going, which
         releases the budget (the FoV levels, above u*, keep priority unless
@@ -695,19 +702,30 @@ class PfCbfPipeline:
         par = self.controller_params
         if not self.use_cbf or self.estimates != "tracker" or par.blind_travel_m <= 0.0:
             return u_star
+        trigger = par.look_fraction * par.blind_travel_m - _LOOK_SLACK_M
+        if par.look_persistence_deg > 0.0:
+            # the early look only for a u* that keeps its course (Σ_w, so the robot's own
+            # turn does not count); a course that changes looks once the budget is spent
+            ux, uy = u_star[:, 0], u_star[:, 1]
+            course = self._own_pose[:, 2] + np.arctan2(uy, ux)
+            prev = self._look_prev_world
+            turn = np.abs(np.angle(np.exp(1j * (course - np.where(np.isnan(prev), 0.0, prev)))))
+            steady = ~np.isnan(prev) & (turn <= math.radians(par.look_persistence_deg))
+            self._look_prev_world = np.where(np.hypot(ux, uy) > 0.0, course, np.nan)
+            trigger = np.where(steady, trigger, par.blind_travel_m - _LOOK_SLACK_M)
         if par.blind_travel_bearings > 0:
             c = self._bearing_travel
             ang = bearing_angles_body(c.shape[1], self._own_pose[:, 2])
             appr = np.cos(ang) * u_star[:, 0:1] + np.sin(ang) * u_star[:, 1:2] > 0.0
             row = np.arange(c.shape[0])
             k = np.argmax(np.where(appr, c, -1.0), axis=1)  # the most-spent approached
-            look = appr[row, k] & (c[row, k] >= _LOOK_FRACTION * par.blind_travel_m)
+            look = appr[row, k] & (c[row, k] >= trigger)
             phi = ang[row, k]
         else:
             e = self._blind_travel_body()
             r = np.hypot(e[:, 0], e[:, 1])
             along = np.einsum("ij,ij->i", e, u_star[:, :2]) > 0.0
-            look = (r >= 0.75 * par.blind_travel_m) & along
+            look = (r >= trigger) & along
             phi = np.arctan2(e[:, 1], e[:, 0])
         if not np.any(look):
             return u_star

@@ -26,12 +26,14 @@ from fov_marl.infos import safety_of
 #: its rows on the camera's own report (``detection_rows``, safety Section 1d) and its
 #: release of last-seen points by their uncertainty (``last_seen_release``, Section 2c),
 #: which every counterfactual below predates too; and before the budget was cleared while
-#: no neighbour can be near (``blind_travel_reach``, Section 2f)
+#: no neighbour can be near (``blind_travel_reach``, Section 2f), and before the early look
+#: waited for a steady course (``look_persistence_deg``)
 _BEFORE_STOP = {
     "arc_guard_stop": False,
     "detection_rows": False,
     "last_seen_release": "point",
     "blind_travel_reach": False,
+    "look_persistence_deg": 0.0,
 }
 _BEFORE_CONE = {
     **_BEFORE_STOP,
@@ -389,7 +391,9 @@ def test_filter_narrow_view_turns_to_look_instead_of_standing_still(stop, lo, hi
     The counterfactual runs on the filter of then (before ``blind_travel_reach``, which
     alone lifts it out of the stall)."""
     fcp = (
-        {"arc_guard_stop": stop} if stop else {"arc_guard_stop": False, "blind_travel_reach": False}
+        {"arc_guard_stop": stop}
+        if stop
+        else {"arc_guard_stop": False, "blind_travel_reach": False, "look_persistence_deg": 0.0}
     )
     rec = run_episode(
         "coverage", "pfcbf", 0, n_agents=6, fov_deg=90.0, max_steps=150, safety_filter=True,
@@ -473,6 +477,7 @@ def test_filter_survives_one_outlying_detection_of_a_seen_neighbour(ess_recovery
             "detection_rows": False,
             "last_seen_release": "point",
             "blind_travel_reach": False,
+            "look_persistence_deg": 0.0,
         }
     case = StressCase("straight", 12, 360.0, "wall", filter_kwargs=fk)
     ep = run_stress_episode(case, 17000, 100)
@@ -831,7 +836,11 @@ def test_filter_packed_blind_pair_keeps_its_last_seen_row(release):
             # the counterfactual on the filter of then (before blind_travel_reach too)
             "controller_params": {"last_seen_release": release}
             if release == "disk"
-            else {"last_seen_release": release, "blind_travel_reach": False},
+            else {
+                "last_seen_release": release,
+                "blind_travel_reach": False,
+                "look_persistence_deg": 0.0,
+            },
         },
     )
     ep = run_stress_episode(case, 43600, 300)
@@ -863,7 +872,11 @@ def test_filter_high_detection_noise_small_budget(detection_rows):
             "tracker_params": {"n_particles_total": 500},
             "controller_params": {"detection_rows": detection_rows}
             if detection_rows
-            else {"detection_rows": False, "blind_travel_reach": False},
+            else {
+                "detection_rows": False,
+                "blind_travel_reach": False,
+                "look_persistence_deg": 0.0,
+            },
         },
     )
     ep = run_stress_episode(case, 43201, 300)

@@ -135,6 +135,18 @@ field                        default   source / reason
                                        Section 2f, :func:`~fov_marl.control.safety.
                                        reach_clear`); opt-in (measured trade-off
                                        there)
+``look_fraction``            0.75      the look before the leap turns a robot once this
+                                       fraction of B is spent along a bearing it still
+                                       approaches (:meth:`~fov_marl.pipeline.
+                                       PfCbfPipeline._look_before_leap`), in (0, 1]; 1:
+                                       only once the budget is spent (the safety
+                                       filter's: measured, random actions, N = 6, 120°:
+                                       56.9% changed against 68.8% with 0.75)
+``look_persistence_deg``     0.0       > 0: the early look (``look_fraction``) only for a
+                                       u* whose translation keeps its course in Σ_w
+                                       within this angle from the last step; another
+                                       u* looks once the budget is spent. 0: always
+                                       early
 ``look_yields_fov``          False     while the look before the leap turns the robot
                                        (:meth:`~fov_marl.pipeline.PfCbfPipeline.
                                        _look_before_leap`), its FoV levels are left
@@ -434,6 +446,12 @@ class ControllerParams:
         detection_rows: add a row on each detected neighbour's raw detection (the
             camera's report with Σ_MEAS; :func:`~fov_marl.control.safety.detection_rows`),
             which only takes approach away; needs the pipeline's observations.
+        look_fraction: spent fraction of the blind travel budget (along a bearing u*
+            still approaches) from which the look before the leap turns the robot, in
+            (0, 1]; 1 (with 1 µm of slack for the float32 actions): once it is spent.
+        look_persistence_deg: > 0: the early look applies only while u*'s translation
+            keeps its course in Σ_w within this angle (degrees, [0, 180]) of the last
+            step's; otherwise the look waits until the budget is spent. 0: off.
         look_yields_fov: leave the FoV rows out of the step of a robot the look before
             the leap turns (``glance`` of :meth:`~fov_marl.control.FovCbfController.solve`).
         lost_fov_yield: when the robot is stalled (less than a fifth of u*'s
@@ -516,6 +534,8 @@ class ControllerParams:
     arc_guard_stop: bool = True
     hold_cleanup: bool = True
     detection_rows: bool = False
+    look_fraction: float = 0.75
+    look_persistence_deg: float = 0.0
     look_yields_fov: bool = False
     walls: bool = True
     wall_gain: float = 2.5
@@ -641,6 +661,8 @@ class ControllerParams:
         _check("cone_half_angle_deg", self.cone_half_angle_deg, 0.0, 179.0, lo_open=True)
         _check("blind_speed_mps", self.blind_speed_mps, 0.0, 100.0)
         _check("look_gain", self.look_gain, 0.0, 100.0)
+        _check("look_fraction", self.look_fraction, 0.0, 1.0, lo_open=True)
+        _check("look_persistence_deg", self.look_persistence_deg, 0.0, 180.0)
         _check("fov_recovery_cap", self.fov_recovery_cap, 0.0, 1.0)
         _check_int("max_levels", self.max_levels, 1, 256)
         _check_int("max_fov_neighbours", self.max_fov_neighbours, 1, 1024)

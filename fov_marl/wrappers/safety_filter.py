@@ -212,6 +212,7 @@ FILTER_CONTROLLER_DEFAULTS: dict[str, Any] = {
     "blind_travel_bearings": 24,
     "blind_travel_memory_s": math.inf,
     "look_yields_fov": True,
+    "look_persistence_deg": 45.0,
     "lost_fov_yield": False,
 }
 #: Tracker settings of the filter that differ from :class:`TrackerParams`'s defaults: the
