@@ -344,7 +344,11 @@ against 73% with the single vector (2 x 150 steps,
 ``tests/wrappers/test_safety_filter.py``: 67% against 50%; K_b = 12 / 36 no fewer).
 The pipeline
 turns the robot towards the most-spent bearing that u* approaches when ``c_k ≥ ¾ B``
-(:meth:`fov_marl.pipeline.PfCbfPipeline._look_before_leap`). The safety filter uses
+(``ControllerParams.look_fraction``;
+:meth:`fov_marl.pipeline.PfCbfPipeline._look_before_leap`); in the safety filter that
+early look is only for a u* that keeps its course in Σ_w within 45° of the last step's
+(``look_persistence_deg``), any other u* looks once the bearing is spent (``c_k ≥ B``):
+the look only turns the robot, the rows above bound the travel either way. The safety filter uses
 K_b = 24 (15°: the bins cost at most 0.9%) at every β, with no leak
 (``blind_travel_memory_s = inf``), and lets that turn outrank the FoV levels for the
 step (``look_yields_fov``, a glance; the collision rows stay):

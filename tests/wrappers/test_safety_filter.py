@@ -513,7 +513,9 @@ def test_the_early_look_waits_for_a_steady_course():
     assert np.all(np.isnan(pipe._look_prev_world))
     _, pipe0 = _look_pipe(0.0)
     assert _looks(pipe0, back) and _looks(pipe0, side)
-    with pytest.raises(ValueError, match=r"look_persistence_deg must be in \[0.0, 180.0\], got 200"):
+    with pytest.raises(
+        ValueError, match=r"look_persistence_deg must be in \[0.0, 180.0\], got 200"
+    ):
         SafetyFilterWrapper(
             fov_coverage_v0.parallel_env(n_agents=2),
             controller_params={"look_persistence_deg": 200.0},
