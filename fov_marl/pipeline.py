@@ -689,8 +689,10 @@ class PfCbfPipeline:
     def _look_before_leap(self, u_star: np.ndarray) -> np.ndarray:
         """Turn a robot that has spent most of its blind travel budget towards it.
 
-        Where ``‖e‖ ≥ f B − 1 µm`` (f = ``look_fraction``, ¾ by default, 1 in the safety
-        filter; :func:`fov_marl.control.safety.blind_travel_step`) and u*
+        Where ``‖e‖ ≥ f B − 1 µm`` (f = ``look_fraction``, ¾ by default; with
+        ``look_persistence_deg > 0``, the safety filter's 45°, only for a u* whose
+        translation kept its course in Σ_w within that angle since the last step, and
+        f = 1 for any other; :func:`fov_marl.control.safety.blind_travel_step`) and u*
         still translates along ``e``, u*'s yaw rate becomes ``sat(look_gain · φ_e)``,
         φ_e the bearing of ``e`` in Σ_i: the robot looks where it has been going, which
         releases the budget (the FoV levels, above u*, keep priority unless
