@@ -69,7 +69,7 @@ from fov_marl.control.safety import (
     team_safety_rows,
 )
 from fov_marl.estimation import TrackerParams, VectorTrackerBank
-from fov_marl.geometry import body_to_world, relative_pose, world_to_body
+from fov_marl.geometry import body_to_world, relative_pose, world_to_body, wrap_angle
 from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, ObservationLayout, velocity_to_action
 
 __all__ = ["PfCbfPipeline"]
@@ -710,9 +710,8 @@ class PfCbfPipeline:
             # turn does not count); a course that changes looks once the budget is spent
             ux, uy = u_star[:, 0], u_star[:, 1]
             course = self._own_pose[:, 2] + np.arctan2(uy, ux)
-            prev = self._look_prev_world
-            turn = np.abs(np.angle(np.exp(1j * (course - np.where(np.isnan(prev), 0.0, prev)))))
-            steady = ~np.isnan(prev) & (turn <= math.radians(par.look_persistence_deg))
+            turn = np.abs(wrap_angle(course - self._look_prev_world))  # NaN: no course yet
+            steady = turn <= math.radians(par.look_persistence_deg)
             self._look_prev_world = np.where(np.hypot(ux, uy) > 0.0, course, np.nan)
             trigger = np.where(steady, trigger, par.blind_travel_m - _LOOK_SLACK_M)
         if par.blind_travel_bearings > 0:

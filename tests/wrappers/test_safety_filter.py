@@ -396,14 +396,21 @@ def test_filter_refuses_a_camera_that_cannot_see_to_ds(make, range_m):
     fov_coverage_v0.parallel_env(n_agents=3, detection_range_m=range_m)
 
 
+def _pair_filter(poses, **controller_params):
+    """Two robots at ``poses`` behind the filter with ``controller_params``, reset
+    (seed 0); returns (env, its pipeline)."""
+    env = SafetyFilterWrapper(
+        fov_coverage_v0.parallel_env(n_agents=2, initial_poses=np.asarray(poses)),
+        controller_params=controller_params,
+    )
+    env.reset(seed=0)
+    return env, env.pipeline
+
+
 def _drive_back(poses, reach, steps=20):
     """Robot 0 commands full speed backwards, robot 1 stands; returns (robot 0's x per
     step, robot-0 steps changed, min distance, the filter's pipeline)."""
-    env = SafetyFilterWrapper(
-        fov_coverage_v0.parallel_env(n_agents=2, initial_poses=poses),
-        controller_params={"blind_travel_reach": reach},
-    )
-    env.reset(seed=0)
+    env, _ = _pair_filter(poses, blind_travel_reach=reach)
     xs, changed, dmin = [], 0, np.inf
     for _ in range(steps):
         _, _, _, _, infos = env.step(
@@ -446,14 +453,7 @@ def test_filter_still_budgets_a_robot_whose_neighbour_can_be_near():
     assert c.max() == pytest.approx(20.0 - x1, abs=1e-3) and c.max() > 0.1
     # the far neighbour, unseen (robot 1 faces away, beyond R_d): clear until its disk,
     # growing at v_max from the known start, reaches H = 2 + 1 + 0.4 = 3.4 m
-    env = SafetyFilterWrapper(
-        fov_coverage_v0.parallel_env(
-            n_agents=2, initial_poses=np.array([[20.0, 20.0, 0.0], [34.0, 20.0, 0.0]])
-        ),
-        controller_params={"blind_travel_reach": True},
-    )
-    env.reset(seed=0)
-    pipe = env.pipeline
+    env, pipe = _pair_filter([[20.0, 20.0, 0.0], [34.0, 20.0, 0.0]], blind_travel_reach=True)
     spin = {"robot_0": np.array([0.0, 0.0, 0.0], np.float32), "robot_1": np.zeros(3, np.float32)}
     cleared = []
     for _ in range(60):
@@ -467,14 +467,9 @@ def test_filter_still_budgets_a_robot_whose_neighbour_can_be_near():
 
 def _look_pipe(persistence_deg: float):
     """A two-robot filter whose robot 0 has spent 0.4 m (80% of B) along every bearing."""
-    env = SafetyFilterWrapper(
-        fov_coverage_v0.parallel_env(
-            n_agents=2, initial_poses=np.array([[20.0, 20.0, 0.3], [30.0, 30.0, 0.0]])
-        ),
-        controller_params={"look_persistence_deg": persistence_deg},
+    env, pipe = _pair_filter(
+        [[20.0, 20.0, 0.3], [30.0, 30.0, 0.0]], look_persistence_deg=persistence_deg
     )
-    env.reset(seed=0)
-    pipe = env.pipeline
     pipe._bearing_travel[:] = 0.4
     return env, pipe
 
