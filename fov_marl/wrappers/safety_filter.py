@@ -277,10 +277,12 @@ def filter_controller_defaults(config: Any, overrides: Any = None) -> dict[str, 
     Without the credit for backing away (``blind_travel_credit_m = 0``, since a neighbour
     that followed a robot unseen was approached 0.9 m blind): 0.9945, 21.3 s (median
     13.7 s), 20 of 20.
-    Narrow views stay costly. Measured with the option ``blind_travel_reach`` (safety
-    Section 2f; the default, without it, in brackets), pfcbf behind the filter, η after 30 s, seeds 0 / 7 / 9: at
-    45° 0.904 / 0.012 / 0.293 (0.818 / 0.011 / 0.084), at 90° 0.977 / 0.577 / 0.943
-    (0.991 / 0.549 / 0.876). An earlier record, on an older filter: 0.98 / 0.41 / 0.99
+    Narrow views stay costly. pfcbf behind the filter, η after 30 s, seeds 0 / 7 / 9, with
+    the steady-course look (``look_persistence_deg = 45``, the default): 0.777 / 0.013 /
+    0.084 at 45°, 0.991 / 0.766 / 0.981 at 90°. Before it, with the option
+    ``blind_travel_reach`` (safety Section 2f; without it in brackets): at 45° 0.904 /
+    0.012 / 0.293 (0.818 / 0.011 / 0.084), at 90° 0.977 / 0.577 / 0.943 (0.991 / 0.549 /
+    0.876). An earlier record, on an older filter: 0.98 / 0.41 / 0.99
     at 90° and 0.82 / 0.010 / 0.084 at 45° (alone 0.99 / 0.99 / 0.98 and
     0.985 / 0.45 / 0.87). Before the arc guard could stop a creep to keep the turn
     (``arc_guard_stop``, safety Section 1c) they were 0.53 / 0.38 / 0.42 and 0.40 / 0.011 /
