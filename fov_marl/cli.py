@@ -343,6 +343,11 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
             srows.append([f, s["mean"], s["std"], lo, hi, s["n"]])
     print()
     print(format_table(srows, ("metric", "mean", "std", "ci95_lo", "ci95_hi", "n")))
+    causes = summary.get("intervention_causes")
+    if causes and any(causes.values()):
+        crows = sorted(([c, v] for c, v in causes.items() if v > 0), key=lambda r: -r[1])
+        print()
+        print(format_table(crows, ("filter changed the action for", "share of robot-steps")))
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
         write_json(out_dir / "results.json", out, indent=2)

@@ -40,7 +40,7 @@ import numpy as np
 
 from fov_marl.baselines import Policy, make_policy
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
-from fov_marl.infos import has_safety, metrics_of, safety_of
+from fov_marl.infos import SAFETY_CAUSES, has_safety, metrics_of, safety_of
 from fov_marl.jsonio import jsonable
 from fov_marl.metrics import optimal_eta, time_to_eta
 from fov_marl.validation import (
@@ -129,6 +129,9 @@ class EpisodeRecord:
     tolerance at the end), ``arrived_ever``, ``time_to_arrival_s`` (all arrived at once),
     ``mean_time_to_arrive_s`` (mean over the robots that arrived of their first
     arrival). ``safety_violations`` counts D_s violation events (a pair entering D_s).
+    Behind the filter, ``intervention_causes`` is the share of robot-steps changed for
+    each cause of :data:`fov_marl.infos.SAFETY_CAUSES` (a step may have several, so the
+    shares can add up to more than ``intervention_rate``).
     ``eta_series`` and ``min_distance_series`` hold one value at reset and one per step
     (sample k at ``k · dt_s``). ``min_distance`` (and its series) is inf for a one-robot
     team (no pair; :meth:`to_json` writes it as None, :func:`summarize` leaves it out).
@@ -155,6 +158,7 @@ class EpisodeRecord:
     qp_fallbacks: int | None = None
     intervention_rate: float | None = None
     mean_action_change: float | None = None
+    intervention_causes: dict[str, float] | None = None
     safety_fallbacks: int | None = None
     time_to_settle_s: float | None = None
     path_length_m: float | None = None
@@ -305,6 +309,8 @@ def run_episode(
     cpu: list[float] = []
     interventions = fallbacks = safety_fb = 0
     du_sum = 0.0
+    cause_k = np.arange(len(SAFETY_CAUSES))
+    cause_n = np.zeros(len(SAFETY_CAUSES), dtype=np.int64)
     have_filter = False
     speeds: list[float] = []
     path = 0.0
@@ -346,6 +352,9 @@ def run_episode(
                 robot_s += t_filter / n  # the filter runs for the team: equal shares
             saf = [safety_of(infos[a]) for a in infos]
             interventions += sum(int(x["intervened"]) for x in saf)
+            for x in saf:
+                bits = int(x.get("cause_bits", 0))
+                cause_n += (bits >> cause_k) & 1
             fallbacks += sum(int(x["fallback"]) for x in saf)
             safety_fb += sum(int(x["status"] == "safety_fallback") for x in saf)
             du_sum += float(
@@ -412,6 +421,11 @@ def run_episode(
         qp_fallbacks=fallbacks if have_filter else None,
         intervention_rate=interventions / robot_steps if have_filter else None,
         mean_action_change=du_sum / robot_steps if have_filter else None,
+        intervention_causes=(
+            {c: int(k) / robot_steps for c, k in zip(SAFETY_CAUSES, cause_n, strict=True)}
+            if have_filter
+            else None
+        ),
         safety_fallbacks=safety_fb if (have_filter or pipe is not None) else None,
         time_to_settle_s=time_to_settle(speeds, dt),
         path_length_m=path,
@@ -752,6 +766,8 @@ def summarize(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     is over the finite values only: ``min_distance`` of a one-robot team is inf (no
     pair), so such episodes count in ``missing``, and with no finite value at all the
     entry's ``mean``, ``std``, ``ci95``, ``min`` and ``max`` are None (never NaN or inf).
+    Behind the filter, ``intervention_causes`` maps each cause to its mean share of
+    robot-steps over the episodes that report it.
     """
     out: dict[str, Any] = {"episodes": len(records)}
     n_max = max((r.n_agents for r in records), default=0)
@@ -763,6 +779,11 @@ def summarize(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
         if f in ("arrived", "arrived_ever"):
             hi = min(hi, float(n_max))
         out[f] = _stats(vals, (lo, hi))
+    causes = [r.intervention_causes for r in records if r.intervention_causes is not None]
+    if causes:
+        out["intervention_causes"] = {
+            c: float(np.mean([x.get(c, 0.0) for x in causes])) for c in SAFETY_CAUSES
+        }
     return out
 
 

@@ -23,10 +23,41 @@ key                             type        meaning
 ``safety/intervened``           bool        ‖u − u*‖ above the controller's tolerance
 ``safety/fallback``             bool        a fallback input was used
 ``safety/status_code``          int         QP outcome, a code of :data:`SAFETY_STATUSES`
+``safety/cause_bits``           int         why the action was changed: bit ``k`` for
+                                            cause ``SAFETY_CAUSES[k]`` (table below); 0
+                                            when it was not
 ==============================  ==========  ==============================================
 
 The ``safety/*`` entries exist only behind the safety filter; at ``reset()`` they hold
-neutral values (zero actions, ``False``, status code 0 = ``"reset"``).
+neutral values (zero actions, ``False``, status code 0 = ``"reset"``, no cause).
+
+Intervention causes (``safety/cause_bits``; :func:`cause_names` decodes, and
+:func:`safety_of` adds the names as ``causes``). A changed action gets every cause
+that applies, at least one:
+
+===  =============  ===========================================================
+bit  cause          the policy's input u* (projected on the admissible set) ...
+===  =============  ===========================================================
+0    ``neighbour``  breaks the line of a neighbour (the collision row of its
+                    belief, or of the camera's report of it)
+1    ``blind``      approaches the particles of an unseen neighbour too fast
+                    (the blind rows)
+2    ``wall``       approaches a wall too fast
+3    ``cone``       moves across the uncertain line of sight of a neighbour
+                    within D_s (its bearing cone)
+4    ``density``    approaches a sector where unseen neighbours are expected
+5    ``last_seen``  approaches where a lost neighbour was last seen
+6    ``budget``     spends more blind travel than the budget allows towards a
+                    bearing the camera has not looked at
+7    ``fov``        breaks none of those, but the FoV levels (Eq. 16-19) were in
+                    the QP: the change keeps neighbours in view
+8    ``look``       the look before the leap turned the robot (ω changed)
+9    ``fallback``   the collision rows could not all be met: a fallback input
+10   ``other``      none of the above (e.g. the arc guard of a turn)
+===  =============  ===========================================================
+
+Bits 0-6 are the row kinds of :mod:`fov_marl.control.safety` (``ROW_KIND_NAMES``; a
+row counts when u* breaks it by more than 1e-9 m/s).
 
 Status codes (``safety/status_code``; :func:`status_name` / :func:`status_code`
 convert):
@@ -74,7 +105,9 @@ __all__ = [
     "SAFETY_KEYS",
     "SAFETY_PREFIX",
     "SAFETY_STATUSES",
+    "SAFETY_CAUSES",
     "agent_infos",
+    "cause_names",
     "has_safety",
     "metrics_of",
     "reset_safety_infos",
@@ -108,6 +141,22 @@ SAFETY_KEYS: tuple[str, ...] = (
     "safety/intervened",
     "safety/fallback",
     "safety/status_code",
+    "safety/cause_bits",
+)
+#: Intervention causes by bit of ``safety/cause_bits`` (module docstring table); the
+#: first seven are the row kinds of :data:`fov_marl.control.safety.ROW_KIND_NAMES`.
+SAFETY_CAUSES: tuple[str, ...] = (
+    "neighbour",
+    "blind",
+    "wall",
+    "cone",
+    "density",
+    "last_seen",
+    "budget",
+    "fov",
+    "look",
+    "fallback",
+    "other",
 )
 _GROUPS = {"metrics": METRICS_PREFIX, "safety": SAFETY_PREFIX}
 
@@ -141,12 +190,29 @@ def status_name(code: int | np.integer | float) -> str:
     return SAFETY_STATUSES[int(c)]
 
 
+def cause_names(bits: int | np.integer | float) -> tuple[str, ...]:
+    """The causes (:data:`SAFETY_CAUSES`, in bit order) of a ``safety/cause_bits`` value
+    (floats from a tensor are accepted); ``()`` for 0.
+
+    Raises:
+        ValueError: not an integer in ``[0, 2^len(SAFETY_CAUSES) − 1]``.
+    """
+    c = float(bits)
+    top = (1 << len(SAFETY_CAUSES)) - 1
+    if not (c.is_integer() and 0 <= c <= top):
+        raise ValueError(f"safety cause_bits must be an integer in [0, {top}], got {bits!r}")
+    b = int(c)
+    return tuple(name for k, name in enumerate(SAFETY_CAUSES) if b >> k & 1)
+
+
 def _group(info: Mapping[str, Any], group: str) -> dict[str, Any]:
     prefix = _GROUPS[group]
     n = len(prefix)
     out = {k[n:]: v for k, v in info.items() if isinstance(k, str) and k.startswith(prefix)}
     if group == "safety" and "status_code" in out:
         out["status"] = status_name(out["status_code"])
+    if group == "safety" and "cause_bits" in out:
+        out["causes"] = cause_names(out["cause_bits"])
     return out
 
 
@@ -210,7 +276,8 @@ def safety_of(info: Mapping[str, Any]) -> dict[str, Any] | None:
     """The safety filter's entries of one agent's info, or None without the filter.
 
     Keys: ``nominal_action``, ``applied_action``, ``intervened``, ``fallback``,
-    ``status_code`` and ``status`` (its string). Accepts the flat and the former nested
+    ``status_code`` and ``status`` (its string), ``cause_bits`` and ``causes`` (their
+    names, :func:`cause_names`). Accepts the flat and the former nested
     format, like :func:`metrics_of`.
     """
     nested = dict.get(info, "safety") if isinstance(info, dict) else info.get("safety")
@@ -256,6 +323,7 @@ def set_safety_infos(
     intervened: np.ndarray,
     fallback: np.ndarray,
     status: Sequence[str],
+    cause_bits: np.ndarray | None = None,
 ) -> None:
     """Write the ``safety/*`` entries of every agent in ``infos`` (in place).
 
@@ -266,10 +334,12 @@ def set_safety_infos(
             robot index; stored as float32 copies).
         intervened, fallback: ``(N,)`` bool.
         status: ``N`` status strings (:data:`SAFETY_STATUSES`).
+        cause_bits: ``(N,)`` integer bit masks of :data:`SAFETY_CAUSES`; None: 0.
     """
     nominal = np.asarray(nominal_action, dtype=np.float32)
     applied = np.asarray(applied_action, dtype=np.float32)
     codes = [status_code(s) for s in status]
+    causes = np.zeros(len(codes), np.int64) if cause_bits is None else np.asarray(cause_bits)
     for a, info in infos.items():
         i = agent_index[a]
         info["safety/nominal_action"] = nominal[i].copy()
@@ -277,14 +347,16 @@ def set_safety_infos(
         info["safety/intervened"] = bool(intervened[i])
         info["safety/fallback"] = bool(fallback[i])
         info["safety/status_code"] = codes[i]
+        info["safety/cause_bits"] = int(causes[i])
 
 
 def reset_safety_infos(infos: Mapping[str, dict], action_size: int = 3) -> None:
     """Write the neutral ``safety/*`` entries of ``reset()`` (in place): zero actions,
-    ``False`` flags, status code 0 (``"reset"``)."""
+    ``False`` flags, status code 0 (``"reset"``), no cause."""
     for info in infos.values():
         info["safety/nominal_action"] = np.zeros(action_size, np.float32)
         info["safety/applied_action"] = np.zeros(action_size, np.float32)
         info["safety/intervened"] = False
         info["safety/fallback"] = False
         info["safety/status_code"] = 0
+        info["safety/cause_bits"] = 0

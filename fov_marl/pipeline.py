@@ -53,6 +53,7 @@ from fov_marl.control import (
     coverage_desired_inputs,
     crossing_desired_input,
 )
+from fov_marl.control.batch_qp import batch_project_to_admissible
 from fov_marl.control.batched import (
     CONTROL_STATUSES,
     BatchControlResult,
@@ -67,9 +68,11 @@ from fov_marl.control.safety import (
     blind_travel_step,
     reach_clear,
     team_safety_rows,
+    violated_kind_bits,
 )
 from fov_marl.estimation import TrackerParams, VectorTrackerBank
 from fov_marl.geometry import body_to_world, relative_pose, world_to_body, wrap_angle
+from fov_marl.infos import SAFETY_CAUSES
 from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, ObservationLayout, velocity_to_action
 
 __all__ = ["PfCbfPipeline"]
@@ -139,6 +142,9 @@ class PfCbfPipeline:
             the last :meth:`filter` (None entries when ``use_cbf`` is False).
         last_batch: the same as one :class:`~fov_marl.control.batched.BatchControlResult`
             (None before the first filtered step).
+        last_cause_bits: ``(B N,)`` int64, why :meth:`filter` changed each robot's input
+            at the last step: bit ``k`` for :data:`fov_marl.infos.SAFETY_CAUSES` ``[k]``,
+            0 where it did not (:meth:`_cause_bits`).
         controllers: the per-robot controllers (``controller="loop"``; empty otherwise).
         last_timings: team wall-clock seconds of the last step per stage
             (``tracker``, ``lloyd``, ``qp``).
@@ -217,6 +223,7 @@ class PfCbfPipeline:
         self._obs_size = SLOT_SIZE * m + CUE_SIZE
         self.last_results: Sequence[ControlResult | None] = _LazyResults(None, R)
         self.last_batch: BatchControlResult | None = None
+        self.last_cause_bits = np.zeros(R, dtype=np.int64)
         self.last_timings: dict[str, float] = {}
         #: last-seen points of the neighbours (world, NaN: never) and the blind travel
         #: (:mod:`fov_marl.control.safety` Sections 2c, 2d), per row
@@ -339,6 +346,7 @@ class PfCbfPipeline:
         self.counters = {"interventions": 0, "fallbacks": 0, "safety_fallbacks": 0}
         self.last_results = _LazyResults(None, self.n_rows)
         self.last_batch = None
+        self.last_cause_bits = np.zeros(self.n_rows, dtype=np.int64)
         seeds = [None] * self.n_copies if seeds is None else list(seeds)
         if self.estimates == "tracker" and self.n > 1:
             self.bank = VectorTrackerBank(self.config, self.tracker_params, n_copies=self.n_copies)
@@ -755,6 +763,7 @@ class PfCbfPipeline:
         looked = u_star[:, 2] != u_nominal[:, 2]
         glance = looked if self.controller_params.look_yields_fov else None
         u = u_star.copy()
+        self.last_cause_bits = np.zeros(R, dtype=np.int64)
         ellipse = self.controller_params.safety_model == "ellipse"
         if self.use_cbf and (self.n > 1 or (ellipse and self.controller_params.walls)):
             if self.n > 1:
@@ -822,6 +831,7 @@ class PfCbfPipeline:
                         ]
                     else:
                         results = _LazyResults(res, R)
+            self.last_cause_bits = self._cause_bits(u_nominal, rows, res, looked)
             self._update_fov_lead(res.level, e["ids"])
             self._yielded = res.yielded.copy()
             self._unblocked = res.unblocked.copy()
@@ -838,6 +848,39 @@ class PfCbfPipeline:
         self._applied = act
         self._travel_pending = True
         return act
+
+    def _cause_bits(
+        self,
+        u_nominal: np.ndarray,
+        rows: SafetyRows | None,
+        res: BatchControlResult,
+        looked: np.ndarray,
+    ) -> np.ndarray:
+        """Why each changed input was changed, as bits of
+        :data:`fov_marl.infos.SAFETY_CAUSES` (its table; 0 for an unchanged one).
+
+        Bits 0-6: the kinds of collision row the policy's u* (``u_nominal (R, 3)``,
+        before the look, projected on the admissible set) breaks
+        (:func:`~fov_marl.control.safety.violated_kind_bits`); ``fov``: none of them,
+        with FoV rows in the QP; ``look``: the look before the leap changed ω;
+        ``fallback``: a fallback input; ``other``: a change with none of these.
+        """
+        bit = {name: np.int64(1) << np.int64(k) for k, name in enumerate(SAFETY_CAUSES)}
+        cfg, par = self.config, self.controller_params
+        u_proj = batch_project_to_admissible(
+            u_nominal, cfg.v_max_mps, cfg.omega_max_radps, par.n_polygon
+        )
+        out = np.zeros(len(u_nominal), dtype=np.int64)
+        if rows is not None:
+            out |= violated_kind_bits(rows, u_proj)
+        fov = (out == 0) & np.asarray(res.active).any(axis=(1, 2))
+        out |= np.where(fov, bit["fov"], 0)
+        turned = looked & (np.abs(res.u[:, 2] - u_proj[:, 2]) > par.intervention_tol)
+        out |= np.where(turned, bit["look"], 0)
+        out |= np.where(np.asarray(res.fallback, dtype=bool), bit["fallback"], 0)
+        changed = np.asarray(res.intervened, dtype=bool)
+        out = np.where(changed, out, 0)
+        return np.where(changed & (out == 0), bit["other"], out)
 
     def set_applied(self, actions: Any) -> None:
         """Replace the actions remembered as applied at the last step.

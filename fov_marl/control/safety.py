@@ -452,7 +452,12 @@ __all__ = [
     "ROW_BLIND",
     "ROW_WALL",
     "ROW_CONE",
+    "ROW_DENSITY",
+    "ROW_LAST_SEEN",
+    "ROW_BUDGET",
+    "ROW_KIND_NAMES",
     "SafetyRows",
+    "violated_kind_bits",
     "arc_margin",
     "arc_yaw_guard",
     "barrier_gain",
@@ -484,8 +489,24 @@ __all__ = [
 #: masses within this of ``risk`` count as not exceeding it (the group sums are
 #: differences of one running sum; ties must not depend on its round-off)
 _MASS_TOL = 1e-9
-#: ``SafetyRows.kind`` codes.
-ROW_NEIGHBOUR, ROW_BLIND, ROW_WALL, ROW_CONE = 0, 1, 2, 3
+#: ``SafetyRows.kind`` codes: the rows of a neighbour's line (Section 1, and the
+#: camera's report, 1d), the particles' blind rows (2), the walls (3), the bearing cone
+#: of a neighbour within D_s (1b), the Gaussian fits' density rows (2b), the last-seen
+#: points (2c) and the blind travel budget (2d-2e). Every kind but the walls and cones
+#: is a possible turn target of the safe fallback; otherwise the controllers treat all
+#: kinds alike (the codes only say where a row comes from).
+ROW_NEIGHBOUR, ROW_BLIND, ROW_WALL, ROW_CONE, ROW_DENSITY, ROW_LAST_SEEN, ROW_BUDGET = range(7)
+#: ``ROW_KIND_NAMES[kind]``: the name of each code (also the first seven intervention
+#: causes of :data:`fov_marl.infos.SAFETY_CAUSES`, bit ``kind``).
+ROW_KIND_NAMES: tuple[str, ...] = (
+    "neighbour",
+    "blind",
+    "wall",
+    "cone",
+    "density",
+    "last_seen",
+    "budget",
+)
 
 
 def safety_triple(safety: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -627,9 +648,10 @@ class SafetyRows:
     Attributes:
         A: ``(R, K, 3)`` (dimensionless: ``[−n_x, −n_y, 0]``).
         b: ``(R, K)`` speed bounds (m/s); +inf for padding rows.
-        kind: ``(R, K)`` int8, :data:`ROW_NEIGHBOUR` / :data:`ROW_BLIND` /
-            :data:`ROW_WALL` / :data:`ROW_CONE` (the bearing cone of a neighbour row,
-            Section 1b), −1 for padding.
+        kind: ``(R, K)`` int8, where each row comes from: :data:`ROW_NEIGHBOUR` /
+            :data:`ROW_BLIND` / :data:`ROW_WALL` / :data:`ROW_CONE` (the bearing cone of
+            a neighbour row, Section 1b) / :data:`ROW_DENSITY` / :data:`ROW_LAST_SEEN` /
+            :data:`ROW_BUDGET` (names: :data:`ROW_KIND_NAMES`), −1 for padding.
         h: ``(R, K)`` barrier value of each row (m): clearance minus D_s (neighbour,
             blind) or wall clearance; +inf for padding.
     """
@@ -643,6 +665,32 @@ class SafetyRows:
         """``(A (K_k, 3), b (K_k,), kind (K_k,))`` of robot k without padding rows."""
         keep = self.kind[k] >= 0
         return self.A[k][keep], self.b[k][keep], self.kind[k][keep]
+
+
+def violated_kind_bits(rows: SafetyRows, u: np.ndarray, tol_mps: float = 1e-9) -> np.ndarray:
+    """Which kinds of row an input violates: bit ``k`` set where ``u`` breaks a row of
+    kind ``k`` (``A u + b < −tol``; padding rows never count).
+
+    The filter's report of why it changed an action (``safety/cause_bits``,
+    :data:`fov_marl.infos.SAFETY_CAUSES`) reads it on the policy's input u*.
+
+    Args:
+        rows: the robots' rows (``R`` robots, ``K`` rows).
+        u: ``(R, 3)`` body-frame inputs ``[vx m/s, vy m/s, ω rad/s]``.
+        tol_mps: how far (m/s) a row may be broken before it counts.
+
+    Returns:
+        ``(R,)`` int64 bit masks (``1 << kind`` per violated kind).
+    """
+    u = np.asarray(u, dtype=np.float64)
+    kind = np.asarray(rows.kind)
+    if kind.shape[1] == 0:
+        return np.zeros(kind.shape[0], dtype=np.int64)
+    with np.errstate(invalid="ignore"):
+        slack = np.einsum("rkc,rc->rk", rows.A, u) + rows.b
+    bad = (slack < -tol_mps) & (kind >= 0)
+    bits = np.where(bad, np.left_shift(np.int64(1), np.maximum(kind, 0).astype(np.int64)), 0)
+    return np.bitwise_or.reduce(bits, axis=1)
 
 
 def neighbour_halfplanes(
@@ -1475,7 +1523,7 @@ def safety_rows(
         )
         blocks_A.append(A)
         blocks_b.append(b)
-        blocks_k.append(np.where(np.isfinite(b), ROW_BLIND, -1).astype(np.int8))
+        blocks_k.append(np.where(np.isfinite(b), ROW_DENSITY, -1).astype(np.int8))
         blocks_h.append(h)
 
     if last_seen_body is not None and last_seen_age_s is not None and M and last_seen_radius_m > 0:
@@ -1493,7 +1541,7 @@ def safety_rows(
         )
         for blocks, x in zip(
             (blocks_A, blocks_b, blocks_k, blocks_h),
-            _approach_only_rows(n_c, h_c, ROW_BLIND, safety_distance_m, m_arc, gain),
+            _approach_only_rows(n_c, h_c, ROW_LAST_SEEN, safety_distance_m, m_arc, gain),
             strict=True,
         ):
             blocks.append(x)
@@ -1509,7 +1557,7 @@ def safety_rows(
         left = blind_travel_m - r
         blocks_A.append(A)
         blocks_b.append(np.where(on, np.maximum(0.0, left / dt_s), np.inf)[:, None])
-        blocks_k.append(np.where(on, ROW_BLIND, -1).astype(np.int8)[:, None])
+        blocks_k.append(np.where(on, ROW_BUDGET, -1).astype(np.int8)[:, None])
         blocks_h.append(np.where(on, left, np.inf)[:, None])
         if v_max_mps * dt_s > blind_travel_m:
             # one step could spend more than the whole budget in a direction the vector
@@ -1521,7 +1569,7 @@ def safety_rows(
             )
             blocks_A.append(A)
             blocks_b.append(b)
-            blocks_k.append(np.where(np.isfinite(b), ROW_BLIND, -1).astype(np.int8))
+            blocks_k.append(np.where(np.isfinite(b), ROW_BUDGET, -1).astype(np.int8))
             blocks_h.append(h)
 
     if bearing_travel_m is not None and blind_travel_m > 0.0:
@@ -1532,7 +1580,7 @@ def safety_rows(
         )
         blocks_A.append(A)
         blocks_b.append(b)
-        blocks_k.append(np.where(np.isfinite(b), ROW_BLIND, -1).astype(np.int8))
+        blocks_k.append(np.where(np.isfinite(b), ROW_BUDGET, -1).astype(np.int8))
         blocks_h.append(h)
 
     if walls and pose_world is not None:

@@ -483,6 +483,7 @@ class VectorEnvVecEnv(VecEnv):
             info["safety/intervened"] = bool(flat["intervened"][s])
             info["safety/fallback"] = bool(flat["fallback"][s])
             info["safety/status_code"] = codes[s]
+            info["safety/cause_bits"] = int(flat["cause_bits"][s])
 
     def reset(self) -> VecEnvObs:
         seed, self._base_seed = self._base_seed, None

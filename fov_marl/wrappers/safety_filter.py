@@ -24,9 +24,14 @@ key                         meaning
                             ``"invalid_input"``; see :class:`~fov_marl.control.ControlResult`)
 ``safety/fallback``         bool, a fallback input was used (``"safety_fallback"``: the
                             collision rows could not all be met)
+``safety/cause_bits``       int, why the action was changed: bit k for
+                            :data:`fov_marl.infos.SAFETY_CAUSES` ``[k]`` (the kinds of
+                            collision row u* breaks, the FoV levels, the look, a
+                            fallback); 0 when it was not
 ==========================  =======================================================
 
-:func:`fov_marl.infos.safety_of` returns them as a dict with the ``status`` string.
+:func:`fov_marl.infos.safety_of` returns them as a dict with the ``status`` string and
+the ``causes`` names.
 
 Wall-clock cost is kept out of ``infos`` (so equal seeds give equal infos): the
 attribute ``last_cpu_s`` holds the seconds the filter spent on the whole team in the
@@ -83,7 +88,11 @@ are still changed, the travel budget and the FoV levels taking over, so no singl
 knob reaches the goal. ``undetected_quantile="particles"`` (the particles' own
 quantile instead of the Gaussian's for those lines) changes 17% and 15% at β = 360°
 (18% and 34% with the Gaussian) and 78% against 81% at 120° (5 x 500 steps); it is an
-ablation, not stress-swept.
+ablation, not stress-swept. Every step reports its own causes (``safety/cause_bits``):
+on the shipped filter (random actions, seeds 0-1 x 150 steps, 60.8% changed) the blind
+travel budget 33.6% of the robot-steps, the look turn 19.8%, the blind rows 17.1%, the
+lines of neighbours 13.4%, the FoV levels alone 9.3%, the last-seen and density rows
+3% (CHANGELOG, with pfcbf, ``ideal`` and the learned policy).
 
 The controller defaults are :class:`~fov_marl.control.ControllerParams`' except
 :data:`FILTER_CONTROLLER_DEFAULTS`: no "keep right" deadlock steering, which would
@@ -483,6 +492,7 @@ class SafetyFilterWrapper(BaseParallelWrapper):
             [r is not None and bool(r.intervened) for r in res],
             [r is not None and bool(r.fallback) for r in res],
             [r.status if r is not None else "no_neighbours" for r in res],
+            self.pipeline.last_cause_bits,
         )
         self.last_cpu_s = t_filter
         if not self.env.agents:

@@ -17,8 +17,9 @@ as a per-copy wrapper does on ``reset()`` without a seed.
 
 ``infos["safety"]`` holds ``(B, N, ...)`` arrays: ``nominal_action`` (3,) float32,
 ``applied_action`` (3,) float32, ``intervened`` bool, ``status`` str (object array),
-``fallback`` bool (see :class:`~fov_marl.wrappers.SafetyFilterWrapper`); ``reset()`` gives
-the neutral report (status ``"reset"``), as the per-copy wrapper does. ``last_cpu_s``:
+``fallback`` bool, ``cause_bits`` int64 (see :class:`~fov_marl.wrappers.SafetyFilterWrapper`);
+``reset()`` gives the neutral report (status ``"reset"``, no cause), as the per-copy
+wrapper does. ``last_cpu_s``:
 seconds the filter spent on all copies in the last step.
 
 Cost and the particle budget. The filter's cost grows about linearly with the
@@ -158,6 +159,7 @@ class VectorSafetyFilterWrapper:
             "intervened": np.zeros((B, N), dtype=bool),
             "status": np.full((B, N), "reset", dtype=object),
             "fallback": np.zeros((B, N), dtype=bool),
+            "cause_bits": np.zeros((B, N), dtype=np.int64),
         }
 
     def _actions(self, actions: Any) -> np.ndarray:
@@ -199,16 +201,19 @@ class VectorSafetyFilterWrapper:
             intervened = res.intervened.reshape(B, N).copy()
             status = _STATUS[res.status].reshape(B, N)
             fallback = res.fallback.reshape(B, N).copy()
+            causes = self.pipeline.last_cause_bits.reshape(B, N).copy()
         else:
             intervened = np.zeros((B, N), dtype=bool)
             status = np.full((B, N), "no_neighbours", dtype=object)
             fallback = np.zeros((B, N), dtype=bool)
+            causes = np.zeros((B, N), dtype=np.int64)
         return {
             "nominal_action": np.clip(act, -1.0, 1.0).astype(np.float32),
             "applied_action": safe.copy(),
             "intervened": intervened,
             "status": status,
             "fallback": fallback,
+            "cause_bits": causes,
         }
 
     def close(self) -> None:

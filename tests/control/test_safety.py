@@ -14,7 +14,9 @@ from fov_marl.config import make_config
 from fov_marl.control import ControllerParams, FovCbfController
 from fov_marl.control.safety import (
     ROW_BLIND,
+    ROW_BUDGET,
     ROW_CONE,
+    ROW_LAST_SEEN,
     ROW_NEIGHBOUR,
     ROW_WALL,
     arc_margin,
@@ -533,13 +535,13 @@ def test_last_seen_rows_forbid_approaching_where_a_lost_neighbour_was():
 
     late = rows(2.0)
     A, b, kind = late.robot(0)
-    row = np.flatnonzero((A[:, 0] > 0.99) & (kind == ROW_BLIND))
+    row = np.flatnonzero((A[:, 0] > 0.99) & (kind == ROW_LAST_SEEN))
     assert row.size == 1 and b[row[0]] == 0.0  # −vx ≤ 0: no backing towards it
     for u, ok in (([-0.5, 0.0, 0.0], False), ([0.5, 0.0, 0.0], True), ([0.0, 1.0, 0.0], True)):
         assert bool(np.all(A[row] @ np.array(u) + b[row] >= -1e-12)) == ok, u
     early = rows(0.0)
     A0, b0, k0 = early.robot(0)
-    r0 = np.flatnonzero((A0[:, 0] > 0.99) & (k0 == ROW_BLIND))
+    r0 = np.flatnonzero((A0[:, 0] > 0.99) & (k0 == ROW_LAST_SEEN))
     m_arc = arc_margin(CFG.v_max_mps, CFG.omega_max_radps, CFG.dt_s)
     gain = ControllerParams().responsibility * ControllerParams().safety_gain
     np.testing.assert_allclose(b0[r0[0]], gain * (2.8 - 0.74 - CFG.safety_distance_m - m_arc))
@@ -570,7 +572,7 @@ def test_pipeline_carries_last_seen_points_into_the_body_frame():
     rows = pipe.safety_rows()
     A, b, kind = rows.robot(0)
     n = last / np.linalg.norm(last)
-    towards = np.flatnonzero((kind == ROW_BLIND) & (np.abs(A[:, :2] @ n + 1.0) < 1e-9))
+    towards = np.flatnonzero((kind == ROW_LAST_SEEN) & (np.abs(A[:, :2] @ n + 1.0) < 1e-9))
     assert towards.size == 1 and b[towards[0]] == 0.0
 
 
@@ -599,7 +601,7 @@ def test_blind_travel_row_stops_travel_along_the_budget_only():
     full = _rows(blind_travel_body=np.array([[0.0, 1.0]]), blind_travel_m=1.0)
     A, b, kind = full.robot(0)
     row = np.flatnonzero(np.abs(A[:, 1] + 1.0) < 1e-12)
-    assert row.size == 1 and kind[row[0]] == ROW_BLIND and b[row[0]] == 0.0
+    assert row.size == 1 and kind[row[0]] == ROW_BUDGET and b[row[0]] == 0.0
     for u, ok in (([0.0, 0.3, 0.0], False), ([0.0, -1.0, 0.0], True), ([1.0, 0.0, 1.0], True)):
         assert bool(A[row[0]] @ np.array(u) + b[row[0]] >= 0.0) == ok, u
     part = _rows(blind_travel_body=np.array([[0.0, 0.9]]), blind_travel_m=1.0)
@@ -723,11 +725,11 @@ def test_bearing_travel_rows_bind_only_near_the_budget():
     )
     rows = team_safety_rows(CFG, par, bearing_travel_m=c, **common)
     A, b, kind = rows.robot(0)
-    budget = (kind == ROW_BLIND) & (b == 0.0)
+    budget = (kind == ROW_BUDGET) & (b == 0.0)
     assert budget.sum() == 1 and np.allclose(A[budget][0], [-1.0, 0.0, 0.0])
     vec = team_safety_rows(CFG, ControllerParams(blind_travel_m=B), bearing_travel_m=c, **common)
     A, b, kind = vec.robot(0)
-    assert (kind == ROW_BLIND).sum() == 1 and np.allclose(A[kind == ROW_BLIND][0], [0, -1, 0])
+    assert (kind == ROW_BUDGET).sum() == 1 and np.allclose(A[kind == ROW_BUDGET][0], [0, -1, 0])
 
 
 def test_bearing_travel_rows_cover_unseen_bearings_when_one_step_exceeds_the_budget():

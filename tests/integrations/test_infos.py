@@ -81,6 +81,7 @@ def test_safety_entries_neutral_at_reset_and_real_after_a_step():
         s = safety_of(info)
         assert s is not None and s["status"] == "reset" and s["status_code"] == 0
         assert not s["intervened"] and not s["fallback"]
+        assert s["cause_bits"] == 0 and s["causes"] == ()
         np.testing.assert_array_equal(s["nominal_action"], np.zeros(3, np.float32))
         np.testing.assert_array_equal(s["applied_action"], np.zeros(3, np.float32))
     acts = {a: np.array([1.0, 0.0, 0.5], np.float32) for a in env.agents}
@@ -89,6 +90,8 @@ def test_safety_entries_neutral_at_reset_and_real_after_a_step():
         s = safety_of(info)
         assert s["status"] in SAFETY_STATUSES[1:]
         assert status_code(s["status"]) == info["safety/status_code"]
+        assert isinstance(info["safety/cause_bits"], int)
+        assert bool(s["causes"]) == bool(s["intervened"])  # a change has a cause
         np.testing.assert_array_equal(s["nominal_action"], acts["robot_0"])
         assert s["applied_action"].shape == (3,) and s["applied_action"].dtype == np.float32
         assert np.all(np.abs(s["applied_action"]) <= 1.0 + 1e-6)
@@ -130,7 +133,7 @@ def test_deprecated_safety_read_returns_the_status_string():
     with pytest.warns(DeprecationWarning, match=r"safety_of"):
         s = infos["robot_0"]["safety"]
     new = safety_of(infos["robot_0"])
-    assert set(s) == set(new) == {k[len("safety/") :] for k in SAFETY_KEYS} | {"status"}
+    assert set(s) == set(new) == {k[len("safety/") :] for k in SAFETY_KEYS} | {"status", "causes"}
     assert isinstance(s["status"], str) and s["status"] == new["status"]
     np.testing.assert_array_equal(s["applied_action"], new["applied_action"])
 

@@ -97,7 +97,7 @@ def test_vector_filter_equals_per_copy_filters(module, n, controller):
             o, r, te, tr, inf = ref.step({a: act[k, i] for i, a in enumerate(agents)})
             applied = np.stack([safety_of(inf[a])["applied_action"] for a in agents])
             np.testing.assert_allclose(s["applied_action"][k], applied, atol=1e-6, err_msg=f"t{t}")
-            for key in ("intervened", "status", "fallback"):
+            for key in ("intervened", "status", "fallback", "cause_bits"):
                 np.testing.assert_array_equal(
                     s[key][k], [safety_of(inf[a])[key] for a in agents], err_msg=key
                 )
