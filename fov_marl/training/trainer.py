@@ -97,7 +97,9 @@ robots), ``fov/final_eta``, ``fov/collisions``, ``fov/safety_violations``,
 ``fov/min_distance`` (episode), crossing: ``fov/arrived``; behind the safety filter
 ``fov/filter_interventions`` (robot-steps where the filter changed the action, per
 episode and robot) and ``fov/filter_intervention_rate``; per rollout ``fov/eta_rollout``
-(mean η over all steps) and, behind the filter, ``fov/intervention_rate_rollout``.
+(mean η over all steps) and, behind the filter, ``fov/intervention_rate_rollout`` and
+``fov/intervention_cause_rollout/<cause>`` (the share of robot-steps changed for each
+cause of :data:`fov_marl.infos.SAFETY_CAUSES`).
 """
 
 from __future__ import annotations
@@ -132,7 +134,7 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
 from fov_marl.config import make_config
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
-from fov_marl.infos import metrics_of, safety_of
+from fov_marl.infos import SAFETY_CAUSES, metrics_of, safety_of
 from fov_marl.training.vec_env import ParallelEnvVecEnv
 from fov_marl.validation import (
     MAX_SEED,
@@ -368,17 +370,23 @@ class FovMetricsCallback(BaseCallback):
         self._steps: dict[int, int] = {}
         self.last_episode_metrics: dict[str, float] = {}
         self._roll = np.zeros(4)  # eta sum, eta count, interventions, filtered robot-steps
+        self._causes = np.zeros(len(SAFETY_CAUSES))  # robot-steps changed per cause
 
     def _on_rollout_start(self) -> None:
         self._roll[:] = 0.0
+        self._causes[:] = 0.0
 
     def _on_rollout_end(self) -> None:
         """Per-rollout means: ``fov/eta_rollout`` (η over every step of every copy) and,
-        behind the filter, ``fov/intervention_rate_rollout`` (robot-steps changed)."""
+        behind the filter, ``fov/intervention_rate_rollout`` (robot-steps changed) and
+        ``fov/intervention_cause_rollout/<cause>`` (robot-steps changed for each cause
+        of :data:`fov_marl.infos.SAFETY_CAUSES`)."""
         if self._roll[1]:
             self.logger.record("fov/eta_rollout", self._roll[0] / self._roll[1])
         if self._roll[3]:
             self.logger.record("fov/intervention_rate_rollout", self._roll[2] / self._roll[3])
+            for name, n in zip(SAFETY_CAUSES, self._causes, strict=True):
+                self.logger.record(f"fov/intervention_cause_rollout/{name}", n / self._roll[3])
 
     def _on_step(self) -> bool:
         infos = self.locals.get("infos", [])
@@ -391,6 +399,8 @@ class FovMetricsCallback(BaseCallback):
         if infos and "safety/intervened" in infos[0]:
             self._roll[2] += sum(bool(i["safety/intervened"]) for i in infos)
             self._roll[3] += len(infos)
+            bits = np.array([int(i.get("safety/cause_bits", 0)) for i in infos], np.int64)
+            self._causes += ((bits[:, None] >> np.arange(len(SAFETY_CAUSES))) & 1).sum(0)
         ended: dict[int, list[dict]] = {}
         for info, done in zip(infos, dones, strict=True):
             k = int(info.get("env_index", 0))

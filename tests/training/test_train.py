@@ -15,7 +15,7 @@ pytest.importorskip("stable_baselines3")
 import torch  # noqa: E402
 from stable_baselines3.common.logger import Logger  # noqa: E402
 
-from fov_marl.infos import metrics_of  # noqa: E402
+from fov_marl.infos import SAFETY_CAUSES, metrics_of  # noqa: E402
 from fov_marl.training import load_policy, train  # noqa: E402
 from fov_marl.training.cli_support import (  # noqa: E402
     add_train_arguments,
@@ -160,6 +160,7 @@ def test_ppo_behind_the_safety_filter(tmp_path):
     assert cfg["wrappers"] == ["safety_filter"]
     rows = list(csv.DictReader((tmp_path / "progress.csv").open()))
     assert any(r.get("fov/filter_intervention_rate") for r in rows)
+    assert {f"fov/intervention_cause_rollout/{c}" for c in SAFETY_CAUSES} <= set(rows[0])
     policy = load_policy(path)
     env = policy.make_env(max_cycles=10)
     acts, infos = _episode(policy, env, seed=0, steps=10)
@@ -277,6 +278,28 @@ def test_metrics_callback_logs_episode_metrics_and_interventions():
     assert logger.name_to_value["fov/final_eta"] == pytest.approx(1.0)  # mean of 0.5, 1.5
     assert logger.name_to_value["fov/team_return"] == pytest.approx(3.0)
     assert cb.episodes == 2
+
+
+def test_metrics_callback_logs_the_share_of_each_intervention_cause():
+    logger = Logger(folder=None, output_formats=[])
+    cb = FovMetricsCallback(n_agents=2)
+    cb.model = SimpleNamespace(logger=logger)
+    budget, look, wall = 1 << 6, 1 << 8, 1 << 2
+    bits = [[budget | look, 0], [wall, budget]]  # 2 steps x 2 slots
+    cb._on_rollout_start()
+    for step_bits in bits:
+        infos = [
+            {"safety/intervened": b != 0, "safety/cause_bits": b, "env_index": 0} for b in step_bits
+        ]
+        cb.locals = {"infos": infos, "dones": np.zeros(2, dtype=bool)}
+        cb._on_step()
+    cb._on_rollout_end()
+    v = logger.name_to_value
+    assert v["fov/intervention_rate_rollout"] == pytest.approx(3 / 4)
+    assert v["fov/intervention_cause_rollout/budget"] == pytest.approx(2 / 4)
+    assert v["fov/intervention_cause_rollout/look"] == pytest.approx(1 / 4)
+    assert v["fov/intervention_cause_rollout/wall"] == pytest.approx(1 / 4)
+    assert v["fov/intervention_cause_rollout/neighbour"] == 0.0
 
 
 def test_cli_runner(tmp_path, capsys):
