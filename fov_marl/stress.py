@@ -27,6 +27,9 @@ key                         meaning
                             of normalised ``[vx, vy, ω]``)
 ``fallbacks``               robot-steps with ``infos[a]["safety/fallback"]``
 ``statuses``                robot-steps per filter ``status`` string
+``intervention_causes``     share of robot-steps changed for each cause of
+                            :data:`fov_marl.infos.SAFETY_CAUSES` (``safety/cause_bits``; a
+                            step may have several); the table's ``top_cause`` is the largest
 ``chatter_rate``            period-2 sign flips of the applied action components per robot-step
                             (:func:`fov_marl.metrics.action_chatter`: ``+, −, +`` on three
                             consecutive steps, all above 0.05 in action units); the filter's
@@ -37,7 +40,7 @@ key                         meaning
                             own ω; the filter passes that on)
 ==========================  ====================================================================
 
-The five filter columns are ``None`` for unfiltered cases. Every number is a
+The six filter columns are ``None`` for unfiltered cases. Every number is a
 deterministic function of the case and the seed: episode k of every case uses seed
 ``seed + k`` for the env and the filter (``env.reset(seed=seed + k)``), and child
 seeds of it (``SeedSequence([seed + k, 1])`` / ``[seed + k, 2]``) for the start poses
@@ -98,7 +101,7 @@ from fov_marl.adversaries import (
     make_adversary,
     make_start_poses,
 )
-from fov_marl.infos import metrics_of, safety_of
+from fov_marl.infos import SAFETY_CAUSES, metrics_of, safety_of
 from fov_marl.jsonio import write_json
 from fov_marl.metrics import chatter_flips
 from fov_marl.validation import (
@@ -319,6 +322,8 @@ def run_stress_episode(
     du_sum = 0.0
     first_collision = None
     statuses: dict[str, int] = {}
+    cause_k = np.arange(len(SAFETY_CAUSES))
+    causes = np.zeros(len(SAFETY_CAUSES), dtype=np.int64)
     n = base.config.n_agents
     applied: list[np.ndarray] = []  # (N, 3) per step, NaN for robots no longer live
     nominal: list[np.ndarray] = []  # the policy's own actions, the same layout
@@ -361,6 +366,7 @@ def run_stress_episode(
             du_sum += float(np.linalg.norm(du, axis=1).sum())
             for s in saf:
                 statuses[str(s["status"])] = statuses.get(str(s["status"]), 0) + 1
+                causes += (int(s.get("cause_bits", 0)) >> cause_k) & 1
     env.close()
     flips = chatter_flips(np.asarray(applied).reshape(-1, n, 3))
     own = chatter_flips(np.asarray(nominal).reshape(-1, n, 3))
@@ -377,6 +383,7 @@ def run_stress_episode(
         "action_change_sum": du_sum if case.filtered else None,
         "fallbacks": fallbacks if case.filtered else None,
         "statuses": dict(sorted(statuses.items())) if case.filtered else None,
+        "cause_counts": causes.tolist() if case.filtered else None,
         "chatter_events": int(flips.sum()),
         "filter_chatter_events": int((flips & ~own).sum()) if case.filtered else None,
     }
@@ -414,6 +421,7 @@ def _aggregate(case: StressCase, eps: list[dict[str, Any]], steps: int) -> dict[
         "mean_action_change": None,
         "fallbacks": None,
         "statuses": None,
+        "intervention_causes": None,
         "chatter_rate": sum(e["chatter_events"] for e in eps) / max(rs, 1),
         "filter_chatter_rate": None,
     }
@@ -429,6 +437,10 @@ def _aggregate(case: StressCase, eps: list[dict[str, Any]], steps: int) -> dict[
             for k, v in e["statuses"].items():
                 statuses[k] = statuses.get(k, 0) + v
         row["statuses"] = dict(sorted(statuses.items()))
+        counts = np.sum([e["cause_counts"] for e in eps], axis=0)
+        row["intervention_causes"] = {
+            c: int(k) / max(rs, 1) for c, k in zip(SAFETY_CAUSES, counts, strict=True)
+        }
         row["filter_chatter_rate"] = sum(e["filter_chatter_events"] for e in eps) / max(rs, 1)
     overrides = {
         k: v
@@ -594,6 +606,7 @@ STRESS_COLUMNS: tuple[tuple[str, str], ...] = (
     ("interv", "intervention_rate"),
     ("mean_du", "mean_action_change"),
     ("fallback", "fallbacks"),
+    ("top_cause", "intervention_causes"),
     ("chatter", "chatter_rate"),
     ("f_chatter", "filter_chatter_rate"),
 )
@@ -609,6 +622,11 @@ def format_stress_table(rows: Sequence[Mapping[str, Any]]) -> str:
             return ("yes" if init == "known" else init) if v else "no"
         if key == "fov_deg":
             return f"{v:g}"
+        if key == "intervention_causes":  # the most frequent cause and its share
+            if not v or not any(v.values()):
+                return None
+            name = max(v, key=v.get)
+            return f"{name} {v[name]:.2f}"
         return v
 
     body = [[cell(k, r.get(k), r) for _, k in STRESS_COLUMNS] for r in rows]

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from fov_marl.adversaries import available_adversaries, available_starts
-from fov_marl.infos import metrics_of, safety_of
+from fov_marl.infos import SAFETY_CAUSES, metrics_of, safety_of
 from fov_marl.stress import (
     FULL_FOV_DEG,
     FULL_N_AGENTS,
@@ -64,9 +64,14 @@ def test_rows_report_what_the_episodes_did():
             assert r["mean_action_change"] >= 0.0
             assert r["fallbacks"] >= 0
             assert sum(r["statuses"].values()) == r["robot_steps"]
+            shares = r["intervention_causes"]
+            assert list(shares) == list(SAFETY_CAUSES)
+            # every changed robot-step has a cause, and only changed ones have any
+            assert max(shares.values()) <= r["intervention_rate"] <= sum(shares.values())
         else:
             assert r["intervention_rate"] is None and r["mean_action_change"] is None
             assert r["fallbacks"] is None and r["statuses"] is None
+            assert r["intervention_causes"] is None
     json.dumps(rows)  # JSON-friendly
     # the unfiltered head-on pair collides in both episodes, closer than contact
     straight = rows[0]
@@ -231,6 +236,9 @@ def test_format_stress_table():
     assert "interv" in lines[0] and "min_d_m" in lines[0] and "Ds_events" in lines[0]
     assert lines[2].split()[:5] == ["straight", "2", "120", "head_on_pair", "no"]
     assert lines[3].split()[:5] == ["head_on", "2", "45", "head_on_pair", "yes"]
+    # the filtered head-on pair is changed mostly for its neighbour's rows
+    top = max(rows[1]["intervention_causes"], key=rows[1]["intervention_causes"].get)
+    assert top == "neighbour" and " neighbour 1.00 " in lines[3]  # every step
     assert lines[-1].startswith("cases with collisions: 1 / 2")
 
 
