@@ -40,7 +40,7 @@ import numpy as np
 
 from fov_marl.baselines import Policy, make_policy
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
-from fov_marl.infos import SAFETY_CAUSES, has_safety, metrics_of, safety_of
+from fov_marl.infos import SAFETY_CAUSES, cause_counts, has_safety, metrics_of, safety_of
 from fov_marl.jsonio import jsonable
 from fov_marl.metrics import optimal_eta, time_to_eta
 from fov_marl.validation import (
@@ -309,7 +309,6 @@ def run_episode(
     cpu: list[float] = []
     interventions = fallbacks = safety_fb = 0
     du_sum = 0.0
-    cause_k = np.arange(len(SAFETY_CAUSES))
     cause_n = np.zeros(len(SAFETY_CAUSES), dtype=np.int64)
     have_filter = False
     speeds: list[float] = []
@@ -352,9 +351,7 @@ def run_episode(
                 robot_s += t_filter / n  # the filter runs for the team: equal shares
             saf = [safety_of(infos[a]) for a in infos]
             interventions += sum(int(x["intervened"]) for x in saf)
-            for x in saf:
-                bits = int(x.get("cause_bits", 0))
-                cause_n += (bits >> cause_k) & 1
+            cause_n += cause_counts([x.get("cause_bits", 0) for x in saf])
             fallbacks += sum(int(x["fallback"]) for x in saf)
             safety_fb += sum(int(x["status"] == "safety_fallback") for x in saf)
             du_sum += float(

@@ -107,6 +107,7 @@ __all__ = [
     "SAFETY_STATUSES",
     "SAFETY_CAUSES",
     "agent_infos",
+    "cause_counts",
     "cause_names",
     "has_safety",
     "metrics_of",
@@ -203,6 +204,13 @@ def cause_names(bits: int | np.integer | float) -> tuple[str, ...]:
         raise ValueError(f"safety cause_bits must be an integer in [0, {top}], got {bits!r}")
     b = int(c)
     return tuple(name for k, name in enumerate(SAFETY_CAUSES) if b >> k & 1)
+
+
+def cause_counts(bits: Any) -> np.ndarray:
+    """How many of the ``safety/cause_bits`` values in ``bits`` (an iterable or array of
+    integers) have each cause: ``(len(SAFETY_CAUSES),)`` int64, in bit order."""
+    b = np.asarray(bits, dtype=np.int64).reshape(-1, 1)
+    return ((b >> np.arange(len(SAFETY_CAUSES))) & 1).sum(axis=0)
 
 
 def _group(info: Mapping[str, Any], group: str) -> dict[str, Any]:

@@ -101,7 +101,7 @@ from fov_marl.adversaries import (
     make_adversary,
     make_start_poses,
 )
-from fov_marl.infos import SAFETY_CAUSES, metrics_of, safety_of
+from fov_marl.infos import SAFETY_CAUSES, cause_counts, metrics_of, safety_of
 from fov_marl.jsonio import write_json
 from fov_marl.metrics import chatter_flips
 from fov_marl.validation import (
@@ -322,7 +322,6 @@ def run_stress_episode(
     du_sum = 0.0
     first_collision = None
     statuses: dict[str, int] = {}
-    cause_k = np.arange(len(SAFETY_CAUSES))
     causes = np.zeros(len(SAFETY_CAUSES), dtype=np.int64)
     n = base.config.n_agents
     applied: list[np.ndarray] = []  # (N, 3) per step, NaN for robots no longer live
@@ -366,7 +365,7 @@ def run_stress_episode(
             du_sum += float(np.linalg.norm(du, axis=1).sum())
             for s in saf:
                 statuses[str(s["status"])] = statuses.get(str(s["status"]), 0) + 1
-                causes += (int(s.get("cause_bits", 0)) >> cause_k) & 1
+            causes += cause_counts([s.get("cause_bits", 0) for s in saf])
     env.close()
     flips = chatter_flips(np.asarray(applied).reshape(-1, n, 3))
     own = chatter_flips(np.asarray(nominal).reshape(-1, n, 3))

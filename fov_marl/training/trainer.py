@@ -134,7 +134,7 @@ from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
 from fov_marl.config import make_config
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
-from fov_marl.infos import SAFETY_CAUSES, metrics_of, safety_of
+from fov_marl.infos import SAFETY_CAUSES, cause_counts, metrics_of, safety_of
 from fov_marl.training.vec_env import ParallelEnvVecEnv
 from fov_marl.validation import (
     MAX_SEED,
@@ -399,8 +399,7 @@ class FovMetricsCallback(BaseCallback):
         if infos and "safety/intervened" in infos[0]:
             self._roll[2] += sum(bool(i["safety/intervened"]) for i in infos)
             self._roll[3] += len(infos)
-            bits = np.array([int(i.get("safety/cause_bits", 0)) for i in infos], np.int64)
-            self._causes += ((bits[:, None] >> np.arange(len(SAFETY_CAUSES))) & 1).sum(0)
+            self._causes += cause_counts([i.get("safety/cause_bits", 0) for i in infos])
         ended: dict[int, list[dict]] = {}
         for info, done in zip(infos, dones, strict=True):
             k = int(info.get("env_index", 0))

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from fov_marl.control import safety as S
 from fov_marl.envs import fov_coverage_v0
 from fov_marl.evaluation import run_episode, summarize
-from fov_marl.infos import SAFETY_CAUSES, cause_names, safety_of
+from fov_marl.infos import SAFETY_CAUSES, cause_counts, cause_names, safety_of
 from fov_marl.wrappers import SafetyFilterWrapper
 
 STILL = np.zeros(3, np.float32)
@@ -38,6 +38,15 @@ def test_cause_names_decode_bits_and_refuse_bad_values():
     for bad in (-1, top + 1, 2.5, float("nan")):
         with pytest.raises(ValueError, match="cause_bits must be an integer in"):
             cause_names(bad)
+
+
+def test_cause_counts_count_each_cause_as_cause_names_decodes_it():
+    rng = np.random.default_rng(5)
+    bits = rng.integers(0, 1 << len(SAFETY_CAUSES), 200)
+    counts = cause_counts(bits)
+    want = [sum(c in cause_names(b) for b in bits) for c in SAFETY_CAUSES]
+    assert counts.dtype == np.int64 and counts.tolist() == want
+    assert cause_counts([]).tolist() == [0] * len(SAFETY_CAUSES)
 
 
 def _reference_bits(A, b, kind, u, tol):
