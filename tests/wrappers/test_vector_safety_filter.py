@@ -127,6 +127,7 @@ def test_vector_filter_api_and_errors():
     _, infos = venv.reset(seed=0)
     # reset reports the neutral filter state, as the per-copy wrapper's reset() does
     assert (infos["safety"]["status"] == "reset").all()
+    assert infos["safety"]["cause_bits"].shape == (2, 3) and not infos["safety"]["cause_bits"].any()
     assert not infos["safety"]["intervened"].any() and not infos["safety"]["fallback"].any()
     assert infos["safety"]["applied_action"].shape == (2, 3, 3)
     with pytest.raises(ValueError, match="shape"):
