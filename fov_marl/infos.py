@@ -145,7 +145,8 @@ SAFETY_KEYS: tuple[str, ...] = (
     "safety/cause_bits",
 )
 #: Intervention causes by bit of ``safety/cause_bits`` (module docstring table); the
-#: first seven are the row kinds of :data:`fov_marl.control.safety.ROW_KIND_NAMES`.
+#: first seven are the row kinds (:data:`fov_marl.control.safety.ROW_KIND_NAMES` is
+#: this slice, the codes ``ROW_NEIGHBOUR`` ... ``ROW_BUDGET`` index it).
 SAFETY_CAUSES: tuple[str, ...] = (
     "neighbour",
     "blind",

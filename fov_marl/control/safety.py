@@ -445,6 +445,7 @@ from scipy.special import ndtri
 from fov_marl.config import ScenarioConfig
 from fov_marl.control.params import ControllerParams
 from fov_marl.geometry import body_to_world, integrate_unicycle
+from fov_marl.infos import SAFETY_CAUSES
 from fov_marl.validation import describe
 
 __all__ = [
@@ -496,17 +497,9 @@ _MASS_TOL = 1e-9
 #: is a possible turn target of the safe fallback; otherwise the controllers treat all
 #: kinds alike (the codes only say where a row comes from).
 ROW_NEIGHBOUR, ROW_BLIND, ROW_WALL, ROW_CONE, ROW_DENSITY, ROW_LAST_SEEN, ROW_BUDGET = range(7)
-#: ``ROW_KIND_NAMES[kind]``: the name of each code (also the first seven intervention
-#: causes of :data:`fov_marl.infos.SAFETY_CAUSES`, bit ``kind``).
-ROW_KIND_NAMES: tuple[str, ...] = (
-    "neighbour",
-    "blind",
-    "wall",
-    "cone",
-    "density",
-    "last_seen",
-    "budget",
-)
+#: ``ROW_KIND_NAMES[kind]``: the name of each code, the first seven intervention causes
+#: of :data:`fov_marl.infos.SAFETY_CAUSES` (bit ``kind``; one list, defined there).
+ROW_KIND_NAMES: tuple[str, ...] = SAFETY_CAUSES[: ROW_BUDGET + 1]
 
 
 def safety_triple(safety: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
