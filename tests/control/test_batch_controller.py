@@ -7,7 +7,7 @@ import zlib
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from fov_marl.config import make_config
@@ -91,7 +91,10 @@ def assert_same(
         ctx = f"robot {i}: {s.status} vs {r.status}"
         # a tie's two solutions may also be made equal by the hold clean-up
         # (controller.hold_cleanup) while the solvers' paths (n_qp) still differ
-        differ = np.abs(r.u - s.u).max() > 1e-6 or r.n_qp != s.n_qp
+        # (seed 217, R = 8, M = 5 of the property test: the cascades' solutions differed by
+        # 2e-3 m/s on a point-sized feasible set, "keep right" was adopted by one and both
+        # then landed on the same u, so only the ``unblocked`` flag told them apart)
+        differ = np.abs(r.u - s.u).max() > 1e-6 or r.n_qp != s.n_qp or r.unblocked != s.unblocked
         if differ and ties < max_ties and _tie(s, r, safety, i):
             ties += 1
             statuses.append(s.status)
@@ -157,6 +160,7 @@ def test_batched_equals_loop_random(name, fov):
 
 @settings(max_examples=25)
 @given(seed=st.integers(0, 2**31 - 1), R=st.integers(1, 8), M=st.integers(0, 7))
+@example(seed=217, R=8, M=5)  # a tie seen only in the flags (see assert_same)
 def test_batched_equals_loop_property(seed, R, M):
     cfg = make_config()
     params = ControllerParams()
