@@ -313,6 +313,7 @@ def bench_batched_filter(
     policy: str = "filter",
     looped: bool = True,
     tracker_overrides: dict[str, Any] | None = None,
+    tracker_threads: int = 1,
 ) -> list[dict]:
     """Safety filter (or pfcbf) cost per robot-step, looped over copies vs batched, one run.
 
@@ -337,13 +338,15 @@ def bench_batched_filter(
         looped: False skips the looped variant (large B).
         tracker_overrides: :class:`~fov_marl.estimation.TrackerParams` fields on top of
             the policy's settings, e.g. ``{"n_particles_total": 500}``.
+        tracker_threads: the batched pipeline's ``tracker_threads`` (the looped variant
+            keeps 1); the actions are the same for every count.
 
     Returns:
         One dict per B: ``n_copies``, ``n_agents``, ``robots`` (B N), ``robot_steps``,
         ``looped_ms`` and ``batched_ms`` (wall ms per robot-step), ``looped_cpu_ms`` /
         ``batched_cpu_ms`` (process CPU time), ``speedup`` (looped / batched, wall),
         ``batched_stage_ms`` (tracker, safety_rows, qp, lloyd per robot-step),
-        ``max_action_diff``, ``n_particles_total``, ``load_1min``.
+        ``max_action_diff``, ``n_particles_total``, ``tracker_threads``, ``load_1min``.
     """
     from dataclasses import replace
 
@@ -382,7 +385,9 @@ def bench_batched_filter(
         ).astype(np.float32)
         poses = np.stack([e.unwrapped.poses for e in envs])
         kw = dict(tracker_params=tp, controller_params=cp)
-        bat = PfCbfPipeline(cfg, n_copies=B, controller="batched", **kw)
+        bat = PfCbfPipeline(
+            cfg, n_copies=B, controller="batched", tracker_threads=tracker_threads, **kw
+        )
         bat.reset_arrays(obs, [seed + k for k in range(B)], poses)
         loops = []
         if looped:
@@ -467,6 +472,7 @@ def bench_batched_filter(
             },
             "max_action_diff": max_diff if looped else None,
             "n_particles_total": int(tp.n_particles_total),
+            "tracker_threads": int(tracker_threads),
             "load_1min": _load(),
         }
         out.append(row)
@@ -548,6 +554,7 @@ def bench_ppo(
     filter_particles: Sequence[int | None] = (None, FAST_FILTER_PARTICLES),
     seed: int = 0,
     workers: Sequence[int] = (1,),
+    tracker_threads: Sequence[int] = (1,),
 ) -> list[dict[str, Any]]:
     """PPO samples/s (SB3, the trainer's default hyper-parameters, 1 torch thread).
 
@@ -563,7 +570,9 @@ def bench_ppo(
     of that time in PPO's gradient epochs (``PPO.train``), the part no env speed-up
     reduces. Each vector row is run for every ``workers`` W (``fov-marl train --workers
     W``: the copies and the filter stepped in W processes, :class:`~fov_marl.envs.
-    SubprocVectorEnv`; W > B skipped); rows carry ``workers``.
+    SubprocVectorEnv`; W > B skipped); rows carry ``workers``. Behind the filter, the
+    one-process vector rows are also run for every ``tracker_threads`` T > 1 (``fov-marl
+    train --filter-threads T``); rows carry ``tracker_threads``.
 
     Needs the ``train`` extra (torch, stable-baselines3); returns no rows without it.
     """
@@ -588,8 +597,14 @@ def bench_ppo(
     prev = torch.get_num_threads()
     torch.set_num_threads(1)
 
-    def one(adapter: str, b: int, filt: bool, p_t: int | None, w: int = 1) -> dict[str, Any]:
-        sf_kw = {"tracker_params": {"n_particles_total": int(p_t)}} if p_t else None
+    def one(
+        adapter: str, b: int, filt: bool, p_t: int | None, w: int = 1, t: int = 1
+    ) -> dict[str, Any]:
+        sf_kw: dict[str, Any] | None = (
+            {"tracker_params": {"n_particles_total": int(p_t)}} if p_t else None
+        )
+        if filt and t > 1:
+            sf_kw = {**(sf_kw or {}), "tracker_threads": int(t)}
 
         def factory() -> Any:
             return build_env("coverage", env_kw, safety_filter=filt, safety_filter_kwargs=sf_kw)
@@ -620,6 +635,7 @@ def bench_ppo(
             "adapter": adapter,
             "n_envs": int(b),
             "workers": int(w),
+            "tracker_threads": int(t) if filt else None,
             "safety_filter": bool(filt),
             "n_particles_total": (int(p_t) if p_t else 2000) if filt else None,
             "samples": int(model.num_timesteps),
@@ -642,6 +658,12 @@ def bench_ppo(
                         if int(w) > int(b):
                             continue
                         r = one("vector", int(b), filt, p_t, int(w))
+                        r["ratio"] = r["samples_per_s"] / base["samples_per_s"] if base else None
+                        rows.append(r)
+                    for t in tracker_threads if filt else ():
+                        if int(t) == 1:
+                            continue
+                        r = one("vector", int(b), filt, p_t, 1, int(t))
                         r["ratio"] = r["samples_per_s"] / base["samples_per_s"] if base else None
                         rows.append(r)
     finally:
@@ -753,8 +775,10 @@ def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             and r["policy"] == "filter"
             and r["robots"] >= ISSUE12_ROBOTS
         ):
+            threads = r.get("tracker_threads", 1)
             add(
-                f"filter ms/robot-step, B*N={r['robots']}, P_T={r.get('n_particles_total')}",
+                f"filter ms/robot-step, B*N={r['robots']}, P_T={r.get('n_particles_total')}"
+                + (f", tracker threads={threads}" if threads > 1 else ""),
                 r["batched_ms"],
                 "<= 0.1 ms",
                 r["batched_ms"] <= 0.1,
@@ -787,9 +811,11 @@ def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             ppo_seen[bool(r["safety_filter"])] = True
             if r["safety_filter"]:
                 today, goal = ISSUE12_PPO_TODAY["filter"], 3000.0
+                threads = r.get("tracker_threads") or 1
                 name = (
                     f"PPO samples/s, filter P_T={r['n_particles_total']}, B={r['n_envs']}, "
                     f"workers={r.get('workers', 1)}"
+                    + (f", tracker threads={threads}" if threads > 1 else "")
                 )
                 text = ">= 3000"
             else:
@@ -858,12 +884,24 @@ def run_benchmarks(
         tracker_overrides={"n_particles_total": FAST_FILTER_PARTICLES},
     ):
         rows.append({"section": "vector_filter", "policy": "filter", **r})
+    # the same two budgets with the tracker on 2 threads (wall time; same actions)
+    for p_t in (2000, FAST_FILTER_PARTICLES):
+        for r in bench_batched_filter(
+            n_copies=(64,),
+            steps=3 if quick else 10,
+            warmup=1 if quick else 2,
+            looped=False,
+            tracker_overrides={"n_particles_total": p_t},
+            tracker_threads=2,
+        ):
+            rows.append({"section": "vector_filter", "policy": "filter", **r})
     if ppo:
         rows.extend(
             bench_ppo(
                 n_envs=(4, 16) if quick else (4, 16, 64),
                 filter_particles=(None, FAST_FILTER_PARTICLES),
                 workers=(1, 2),
+                tracker_threads=(1, 2),
             )
         )
     try:

@@ -74,6 +74,7 @@ from fov_marl.estimation import TrackerParams, VectorTrackerBank
 from fov_marl.geometry import body_to_world, relative_pose, world_to_body, wrap_angle
 from fov_marl.infos import SAFETY_CAUSES
 from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, ObservationLayout, velocity_to_action
+from fov_marl.validation import check_int
 
 __all__ = ["PfCbfPipeline"]
 
@@ -136,6 +137,9 @@ class PfCbfPipeline:
             settle differently, both meeting every row within 1e-3 m/s (measured: 2 of
             10,800 random robots, where round-off of 1e-16 in the fixed rows' bounds decides
             whether a level can be met exactly; ``tests/control/test_batch_controller.py``).
+        tracker_threads: threads that step the tracker bank
+            (:class:`~fov_marl.estimation.VectorTrackerBank`'s ``n_threads``, an int in
+            ``[1, 1024]``, default 1); the same numbers for every count.
 
     Attributes:
         last_results: the :class:`~fov_marl.control.ControlResult` of every robot (row) at
@@ -163,6 +167,7 @@ class PfCbfPipeline:
         init: Literal["known", "uniform"] = "known",
         n_copies: int = 1,
         controller: Controller = "auto",
+        tracker_threads: int = 1,
     ) -> None:
         if estimates not in ("tracker", "oracle"):
             raise ValueError(f"estimates must be 'tracker' or 'oracle', got {estimates!r}")
@@ -172,6 +177,7 @@ class PfCbfPipeline:
             raise ValueError(f"controller must be 'auto', 'batched' or 'loop', got {controller!r}")
         if isinstance(n_copies, bool) or not isinstance(n_copies, int | np.integer) or n_copies < 1:
             raise ValueError(f"n_copies must be an int >= 1, got {n_copies!r}")
+        self.tracker_threads = check_int("tracker_threads", tracker_threads, 1, 1024)
         self.config = config
         self.n = config.n_agents
         self.n_copies = int(n_copies)
@@ -349,7 +355,12 @@ class PfCbfPipeline:
         self.last_cause_bits = np.zeros(self.n_rows, dtype=np.int64)
         seeds = [None] * self.n_copies if seeds is None else list(seeds)
         if self.estimates == "tracker" and self.n > 1:
-            self.bank = VectorTrackerBank(self.config, self.tracker_params, n_copies=self.n_copies)
+            self.bank = VectorTrackerBank(
+                self.config,
+                self.tracker_params,
+                n_copies=self.n_copies,
+                n_threads=self.tracker_threads,
+            )
             init = self._known_init(init_all)
             t0 = time.perf_counter()
             self.bank.reset(

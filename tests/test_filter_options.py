@@ -193,3 +193,25 @@ def test_stress_table_names_a_uniform_filter_init():
     assert "uniform" in uni.splitlines()[2]
     assert " yes " in format_stress_table([row]).splitlines()[2]
     assert " no " in format_stress_table([{**row, "filtered": False}]).splitlines()[2]
+
+
+def test_filter_threads_flag(tmp_path, capsys):
+    """``--filter-threads T`` (train): the wrappers' ``tracker_threads``, checked first."""
+    assert filter_kwargs(None, None, True, threads="2") == {"tracker_threads": 2}
+    assert filter_kwargs(["n_particles_total=300"], None, True, threads=1) == {
+        "tracker_params": {"n_particles_total": 300},
+        "tracker_threads": 1,
+    }
+    for bad in ("0", "1025", "1.5", "-1", "two", ""):
+        with pytest.raises(ValueError, match=r"--filter-threads must be an integer in \[1, 1024\]"):
+            filter_kwargs(None, None, True, threads=bad)
+    with pytest.raises(ValueError, match="--filter-threads.*--safety-filter"):
+        filter_kwargs(None, None, False, threads="2")
+    out = tmp_path / "run"
+    assert main(["train", "--safety-filter", "--filter-threads", "0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--filter-threads" in err and "[1, 1024]" in err and len(err.splitlines()) == 1
+    assert not out.exists()
+    # evaluate has no such flag (one team's filters gain nothing from threads)
+    with pytest.raises(SystemExit):
+        main(["evaluate", "--safety-filter", "--filter-threads", "2", "--episodes", "1"])

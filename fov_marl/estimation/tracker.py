@@ -89,7 +89,10 @@ particles are assigned by stratified prior quantiles, no draw); the reset draws
 from __future__ import annotations
 
 import math
+import os
+import threading
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
@@ -947,6 +950,58 @@ class _BankCore:
 #: B = 8: P_T = 2000 tracker 0.307 -> 0.266-0.272; no case slower. Chunking changes no number.
 CHUNK_PARTICLES = 131072
 
+#: Thread pools shared by the banks, one per (process, thread count), created on first
+#: use. A bank holds only its count, so it stays picklable and copyable; the process id
+#: in the key gives a forked worker (``SubprocVecEnv``) pools of its own instead of the
+#: parent's, whose threads do not exist in the child.
+_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
+_POOLS_LOCK = threading.Lock()
+
+
+def _pool(n_threads: int) -> ThreadPoolExecutor:
+    key = (os.getpid(), n_threads)
+    with _POOLS_LOCK:
+        pool = _POOLS.get(key)
+        if pool is None:
+            pool = _POOLS[key] = ThreadPoolExecutor(n_threads, thread_name_prefix="fov_marl-pf")
+        return pool
+
+
+def _check_threads(n_threads: Any) -> int:
+    """``n_threads``: an int in ``[1, 1024]`` (a ``ValueError`` naming it otherwise)."""
+    return check_int("n_threads", n_threads, 1, 1024)
+
+
+def _chunk_bounds(n_rows: int, n_particles: int, n_threads: int) -> list[tuple[int, int]]:
+    """Row ranges ``[(start, end), ...]`` of the computation chunks: about
+    :data:`CHUNK_PARTICLES` particles each, and at least ``n_threads`` chunks where there
+    are that many rows (so every thread has work)."""
+    per = max(1, CHUNK_PARTICLES // max(1, n_particles))
+    if n_threads > 1:
+        per = min(per, -(-n_rows // n_threads))
+    return [(s, min(s + per, n_rows)) for s in range(0, n_rows, per)]
+
+
+def _step_cores(cores, bounds, act: np.ndarray, obs_arr: np.ndarray, n_threads: int) -> None:
+    """Step every chunk, on ``n_threads`` threads when there are several chunks.
+
+    The chunks share no array and no Generator (each row draws from its own), so the
+    order in which the threads run them changes no number: threaded and serial steps are
+    bit-identical (tested). NumPy releases the GIL inside its array loops and its
+    Generators' fills, which is where a step spends its time.
+    """
+    if n_threads == 1 or len(cores) == 1:
+        for core, (s, e) in zip(cores, bounds, strict=True):
+            core.step(act[s:e], obs_arr[s:e])
+        return
+    pool = _pool(n_threads)
+    futures = [
+        pool.submit(core.step, act[s:e], obs_arr[s:e])
+        for core, (s, e) in zip(cores, bounds, strict=True)
+    ]
+    for f in futures:
+        f.result()  # a chunk's exception is raised here
+
 
 class TrackerBank:
     """The particle-filter banks of several robots, stepped together (see module docstring).
@@ -965,10 +1020,16 @@ class TrackerBank:
         rngs: one ``np.random.Generator`` per robot of the bank. Default: spawned from
             ``np.random.SeedSequence(seed)``, child ``k`` for row ``k``.
         seed: ``None`` or an integer ≥ 0; used only when ``rngs`` is None (checked always).
+        n_threads: threads that step the chunks (an int in ``[1, 1024]``, default 1); the
+            rows are then split into at least that many chunks. The numbers are the same
+            for every count (tested). Threads pay off from about 10^5 particles in the bank
+            (:func:`fov_marl.bench.bench_batched_filter`'s ``tracker_threads``); leave 1
+            where the process already runs one bank per core (``SubprocVecEnv``
+            workers).
 
     Raises:
-        ValueError: bad ``config``, ``params``, ``agent_indices``, ``rngs``, ``seed``, or
-            ``n_particles_total < N − 1``.
+        ValueError: bad ``config``, ``params``, ``agent_indices``, ``rngs``, ``seed``,
+            ``n_threads``, or ``n_particles_total < N − 1``.
     """
 
     def __init__(
@@ -979,6 +1040,7 @@ class TrackerBank:
         agent_indices: Sequence[int] | None = None,
         rngs: Sequence[np.random.Generator] | None = None,
         seed: int | None = None,
+        n_threads: int = 1,
     ) -> None:
         if not isinstance(config, ScenarioConfig):
             raise ValueError(f"config must be a ScenarioConfig, got {type(config).__name__}")
@@ -1020,8 +1082,8 @@ class TrackerBank:
         self._M = m
         self._P = int(params.n_particles_total)
         self._obs_size = SLOT_SIZE * m + CUE_SIZE
-        per = max(1, CHUNK_PARTICLES // self._P)
-        self._bounds = [(s, min(s + per, self._R)) for s in range(0, self._R, per)]
+        self.n_threads = _check_threads(n_threads)
+        self._bounds = _chunk_bounds(self._R, self._P, self.n_threads)
         self._cores = [
             _BankCore(config, params, self.agent_indices[s:e], rngs[s:e]) for s, e in self._bounds
         ]
@@ -1198,8 +1260,7 @@ class TrackerBank:
         if not self._initialised:
             self.reset(obs_arr)
             return
-        for core, (s, e) in zip(self._cores, self._bounds, strict=True):
-            core.step(act[s:e], obs_arr[s:e])
+        _step_cores(self._cores, self._bounds, act, obs_arr, self.n_threads)
 
     # ------------------------------------------------------------------ outputs
     def _check_init(self) -> None:
@@ -1410,13 +1471,20 @@ class VectorTrackerBank:
         config: the scenario (N robots per copy).
         params: tracker parameters (default :class:`TrackerParams()`).
         n_copies: B ≥ 1.
+        n_threads: threads that step the chunks (see :class:`TrackerBank`; default 1).
 
     Raises:
-        ValueError: bad ``config``, ``params``, ``n_copies``, or ``n_particles_total < N − 1``.
+        ValueError: bad ``config``, ``params``, ``n_copies``, ``n_threads``, or
+            ``n_particles_total < N − 1``.
     """
 
     def __init__(
-        self, config: ScenarioConfig, params: TrackerParams | None = None, *, n_copies: int
+        self,
+        config: ScenarioConfig,
+        params: TrackerParams | None = None,
+        *,
+        n_copies: int,
+        n_threads: int = 1,
     ) -> None:
         if isinstance(n_copies, bool) or not isinstance(n_copies, int | np.integer):
             raise ValueError(f"n_copies must be an int >= 1, got {n_copies!r}")
@@ -1435,8 +1503,8 @@ class VectorTrackerBank:
         self._obs_size = one._obs_size
         self.agent_indices = np.tile(np.arange(N, dtype=np.int64), B)
         self.copy_index = np.repeat(np.arange(B, dtype=np.int64), N)
-        per = max(1, CHUNK_PARTICLES // self._P)
-        self._bounds = [(s, min(s + per, self._R)) for s in range(0, self._R, per)]
+        self.n_threads = _check_threads(n_threads)
+        self._bounds = _chunk_bounds(self._R, self._P, self.n_threads)
         self._cores: list[_BankCore] = []
         self._initialised = False
 
@@ -1577,8 +1645,7 @@ class VectorTrackerBank:
             raise ValueError("step() called before reset()")
         act = self._array(actions, "actions", (3,))
         obs_arr = self._array(obs, "obs", (self._obs_size,))
-        for core, (s, e) in zip(self._cores, self._bounds, strict=True):
-            core.step(act[s:e], obs_arr[s:e])
+        _step_cores(self._cores, self._bounds, act, obs_arr, self.n_threads)
 
     # ------------------------------------------------------------------ outputs
     @property

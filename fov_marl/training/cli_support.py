@@ -123,7 +123,7 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     )
     from fov_marl.filter_options import add_filter_arguments
 
-    add_filter_arguments(parser)
+    add_filter_arguments(parser, threads=True)
     parser.add_argument(
         "--belief",
         action="store_true",
@@ -401,6 +401,7 @@ def run_train(args: argparse.Namespace) -> Path | int:
         args.filter_controller,
         args.safety_filter,
         init=getattr(args, "filter_init", None),
+        threads=getattr(args, "filter_threads", None),
     )
     scenario, env_kwargs, sources = _resolve(args)
     hyperparams = parse_hyperparams(args.hp, flag="--hp")

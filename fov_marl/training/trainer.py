@@ -318,6 +318,7 @@ def make_training_vec_env(
             init=pipe.init,
             tracker_params=pipe.tracker_params,
             controller_params=pipe.controller_params,
+            tracker_threads=pipe.tracker_threads,
         )
     if make is not None:
         probe.close()

@@ -392,6 +392,11 @@ class SafetyFilterWrapper(BaseParallelWrapper):
         controller: ``"auto"`` (one :class:`~fov_marl.control.FovCbfController` per robot for
             one team: as fast, and bit for bit the numbers of before), ``"batched"`` or
             ``"loop"`` (:class:`~fov_marl.pipeline.PfCbfPipeline`); same actions within 1e-6.
+        tracker_threads: threads that step the particle filters (an int in ``[1, 1024]``,
+            default 1; the same actions for every count). One team's filters are too
+            small to gain from threads; the option is here so that ``fov-marl train
+            --filter-threads`` reaches :class:`VectorSafetyFilterWrapper`, which builds
+            its filter from this wrapper's.
     """
 
     def __init__(
@@ -403,6 +408,7 @@ class SafetyFilterWrapper(BaseParallelWrapper):
         controller_params: ControllerParams | dict | None = None,
         draw_robot: int | None = 0,
         controller: str = "auto",
+        tracker_threads: int = 1,
     ) -> None:
         base = fov_parallel_base(
             "SafetyFilterWrapper", env, "for B copies use VectorSafetyFilterWrapper"
@@ -422,6 +428,7 @@ class SafetyFilterWrapper(BaseParallelWrapper):
             controller_params=controller_params,
             init=init,  # type: ignore[arg-type]
             controller=controller,  # type: ignore[arg-type]
+            tracker_threads=tracker_threads,
         )
         self.draw_robot = draw_robot
         self._seed_rng = np.random.default_rng()

@@ -77,6 +77,9 @@ class VectorSafetyFilterWrapper:
             defaults).
         controller: ``"auto"``, ``"batched"`` or ``"loop"`` (see
             :class:`~fov_marl.pipeline.PfCbfPipeline`).
+        tracker_threads: threads that step the filters' particle filters, an int in
+            ``[1, 1024]`` (default 1; module docstring). The actions are the same for
+            every count.
     """
 
     #: The per-copy wrappers this vector wrapper stands for (SB3's ``env_is_wrapped``
@@ -91,6 +94,7 @@ class VectorSafetyFilterWrapper:
         tracker_params: TrackerParams | dict | None = None,
         controller_params: ControllerParams | dict | None = None,
         controller: str = "auto",
+        tracker_threads: int = 1,
     ) -> None:
         for attr in ("num_envs", "config", "reset", "step", "poses"):
             if not hasattr(venv, attr):
@@ -113,6 +117,7 @@ class VectorSafetyFilterWrapper:
             init=init,  # type: ignore[arg-type]
             n_copies=self.num_envs,
             controller=controller,  # type: ignore[arg-type]
+            tracker_threads=tracker_threads,
         )
         self._seed_rngs = [np.random.default_rng() for _ in range(self.num_envs)]
         self._ready = False

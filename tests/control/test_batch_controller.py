@@ -371,6 +371,15 @@ def test_bench_batched_filter_reports_both_variants():
     assert r["batched_ms"] > 0 and r["looped_ms"] > 0 and r["speedup"] > 0
     assert r["max_action_diff"] <= 1e-6
     assert set(r["batched_stage_ms"]) == {"tracker", "safety_rows", "qp", "lloyd"}
+    assert r["tracker_threads"] == 1
+    # the batched tracker on 2 threads: the looped (serial) variant's actions
+    (t,) = bench_batched_filter(n_copies=(2,), n_agents=3, steps=2, warmup=1, tracker_threads=2)
+    assert t["tracker_threads"] == 2 and t["max_action_diff"] <= 1e-6
+    from fov_marl.bench import issue12_summary
+
+    big = {**t, "section": "vector_filter", "robots": 384, "batched_ms": 0.09}
+    (row,) = [x for x in issue12_summary([big]) if "threads" in x["figure"]]
+    assert row["figure"].endswith("P_T=2000, tracker threads=2") and row["met"]
     (p,) = bench_batched_filter(n_copies=(2,), n_agents=3, steps=1, warmup=0, policy="pfcbf")
     assert p["max_action_diff"] <= 1e-6 and p["batched_stage_ms"]["lloyd"] > 0
     with pytest.raises(ValueError, match="policy"):

@@ -443,6 +443,17 @@ def test_make_training_vec_env_picks_the_adapter():
     )
     assert isinstance(adapter, VectorEnvVecEnv)
     assert isinstance(adapter.venv, VectorSafetyFilterWrapper)
+    assert adapter.venv.pipeline.tracker_threads == 1
+    # --filter-threads: the per-copy wrapper's tracker_threads reaches the vector filter
+    adapter, _ = make_training_vec_env(
+        2,
+        lambda: build_env(
+            "coverage", {"n_agents": N}, safety_filter=True,
+            safety_filter_kwargs={"tracker_threads": 2},
+        ),
+        normalize=False,
+    )  # fmt: skip
+    assert adapter.venv.pipeline.tracker_threads == 2
     built = []
 
     def wrapped():

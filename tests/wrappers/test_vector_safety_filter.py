@@ -69,17 +69,26 @@ class LoopVectorEnv:
 
 
 @pytest.mark.parametrize(
-    "module,n,controller",
-    [(fov_coverage_v0, 4, "auto"), (fov_crossing_v0, 4, "batched"), (fov_coverage_v0, 3, "loop")],
+    "module,n,controller,threads",
+    [
+        (fov_coverage_v0, 4, "auto", 1),
+        (fov_crossing_v0, 4, "batched", 1),
+        (fov_coverage_v0, 3, "loop", 1),
+        # the tracker's chunks on 2 threads (2 chunks of 6 robots): the same actions
+        (fov_coverage_v0, 4, "batched", 2),
+    ],
 )
-def test_vector_filter_equals_per_copy_filters(module, n, controller):
+def test_vector_filter_equals_per_copy_filters(module, n, controller, threads):
     B, seed, T, cycles = 3, 7, 30, 12  # episodes end (and copies restart) twice
     kw = dict(n_agents=n, max_cycles=cycles, arena_size_m=12.0)  # dense: the filter acts
     if module is fov_crossing_v0:
         kw["crossing_radius_m"] = 4.0
-    venv = VectorSafetyFilterWrapper(LoopVectorEnv(module, B, **kw), controller=controller)
+    venv = VectorSafetyFilterWrapper(
+        LoopVectorEnv(module, B, **kw), controller=controller, tracker_threads=threads
+    )
     refs = [SafetyFilterWrapper(module.parallel_env(**kw)) for _ in range(B)]
     obs, _ = venv.reset(seed=seed)
+    assert len(venv.pipeline.bank._cores) == threads
     ref_obs = [r.reset(seed=seed + k)[0] for k, r in enumerate(refs)]
     for k in range(B):
         np.testing.assert_array_equal(
@@ -150,6 +159,8 @@ def test_vector_filter_api_and_errors():
     assert venv.last_cpu_s > 0
     with pytest.raises(ValueError, match="vector env"):
         VectorSafetyFilterWrapper(object())
+    with pytest.raises(ValueError, match=r"tracker_threads must be an integer in \[1, 1024\]"):
+        VectorSafetyFilterWrapper(LoopVectorEnv(fov_coverage_v0, 1, n_agents=3), tracker_threads=0)
     with pytest.raises(ValueError, match="controller_params"):
         VectorSafetyFilterWrapper(
             LoopVectorEnv(fov_coverage_v0, 1, n_agents=3), controller_params={"nope": 1}
