@@ -31,11 +31,17 @@ times the filter at B N = 384 at the default and at P_T = 500
 calibrated on every tested behaviour (``tests/estimation/test_mixture_calibration.py``,
 ``test_reduced_budget_is_calibrated``); below that it is not (P_T = 250: 0.894 inside
 the 95% ellipse for a robot driving straight). A smaller budget is a choice of the
-user's; the default stays 2000. The filter is single-threaded NumPy: to use more cores,
-split the copies over processes with :class:`~fov_marl.envs.SubprocVectorEnv` and
-:func:`build_filtered_vector_env` (``fov-marl train --safety-filter --workers W``; the
-same numbers). PPO behind the filter at B = 64 on the 2-core machine: 2,410 samples/s
-in one process, 3,812 with 2 workers (CHANGELOG).
+user's; the default stays 2000.
+
+Using more cores, the same numbers either way. ``tracker_threads=T`` steps the
+tracker's chunks on T threads (NumPy releases the GIL in its array loops and its
+Generators' fills; ``fov-marl train --filter-threads T``); the safety rows and the QPs
+stay on one thread. Or split the copies over processes with
+:class:`~fov_marl.envs.SubprocVectorEnv` and :func:`build_filtered_vector_env`
+(``fov-marl train --safety-filter --workers W``), which parallelises the env and the
+whole filter; use one or the other, not both, on a machine with few cores. PPO behind
+the filter at B = 64 on the 2-core machine: 2,410 samples/s in one process, 3,812 with
+2 workers (CHANGELOG); the tracker on 2 threads: CHANGELOG.
 """
 
 from __future__ import annotations
