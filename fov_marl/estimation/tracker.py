@@ -952,8 +952,8 @@ CHUNK_PARTICLES = 131072
 
 #: Thread pools shared by the banks, one per (process, thread count), created on first
 #: use. A bank holds only its count, so it stays picklable and copyable; the process id
-#: in the key gives a forked worker (``SubprocVecEnv``) pools of its own instead of the
-#: parent's, whose threads do not exist in the child.
+#: in the key gives a forked child (``multiprocessing``'s default start on Linux) pools of
+#: its own instead of the parent's, whose threads do not exist in the child.
 _POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
 _POOLS_LOCK = threading.Lock()
 
@@ -1025,11 +1025,11 @@ class TrackerBank:
             ``np.random.SeedSequence(seed)``, child ``k`` for row ``k``.
         seed: ``None`` or an integer ≥ 0; used only when ``rngs`` is None (checked always).
         n_threads: threads that step the chunks (an int in ``[1, 1024]``, default 1); the
-            rows are then split into at least that many chunks. The numbers are the same
-            for every count (tested). Threads pay off from about 10^5 particles in the bank
-            (:func:`fov_marl.bench.bench_batched_filter`'s ``tracker_threads``); leave 1
-            where the process already runs one bank per core (``SubprocVecEnv``
-            workers).
+            rows are then split into equal chunks, a multiple of that many. The numbers
+            are the same for every count (tested). Threads pay off from about 10^5
+            particles in the bank (:func:`fov_marl.bench.bench_batched_filter`'s
+            ``tracker_threads``); leave 1 where the process already runs one bank per
+            core (``SubprocVectorEnv`` workers).
 
     Raises:
         ValueError: bad ``config``, ``params``, ``agent_indices``, ``rngs``, ``seed``,
