@@ -354,6 +354,24 @@ K_b = 24 (15°: the bins cost at most 0.9%) at every β, with no leak
 step (``look_yields_fov``, a glance; the collision rows stay):
 :func:`fov_marl.wrappers.safety_filter.filter_controller_defaults`.
 
+Why the projection, and not the distance to what the last look showed. For a neighbour
+that stands still, the projection overcounts: driving straight past a point at bearing
+ψ closes on it by at most ``d (1 − sin ψ)`` in all, while the row books ``s cos ψ``
+per ``s`` driven, without end (hence the glance every ~1.3 m below). But the row must
+also hold for a neighbour that moves. For robots i and j at ``p_i``, ``p_j``, with
+``n_0`` the unit vector from i to j when the budgets last started counting and ``Δ_i``,
+``Δ_j`` the displacements since, the triangle inequality gives
+
+    d_0 − d_1 ≤ n_0 · Δ_i + (−n_0) · Δ_j,
+
+each robot's projection on its own fixed world bearing towards the other: exactly what
+the two rows bound (by B each). The bound is tight for a j that follows i at a constant
+bearing (``p_j − p_i`` stays parallel to ``n_0``), and then i's share is its
+projection ``s cos ψ``, whatever i saw: a rule that books i less for that direction (the
+distance to a static point, or to the half-line its last look showed empty) leaves that
+follower free to close by more than ``2 B``. The stress sweeps' ``chase_last_seen`` and
+``head_on`` adversaries are such followers.
+
 Why per bearing also for wide views, and why no leak. The single vector is blind to a
 neighbour that moves: two robots may each travel where they look and still approach
 each other from outside each other's view. Measured (the filter, robots that drive at
