@@ -52,6 +52,13 @@ import numpy as np
 __all__ = [
     "SLOT_SIZE",
     "CUE_SIZE",
+    "SLOT_DETECTED",
+    "SLOT_P_BODY",
+    "SLOT_YAW_CS",
+    "CUE_P_WORLD",
+    "CUE_YAW_CS",
+    "CUE_GOAL_BODY",
+    "CUE_SCALAR",
     "ObservationLayout",
     "Detections",
     "action_to_velocity",
@@ -60,6 +67,22 @@ __all__ = [
 
 SLOT_SIZE = 5
 CUE_SIZE = 7
+
+# The entries of the tables above, by name (the one place that says where each is):
+#: slot entry 0, the detection flag (1.0 if j ∈ F_i else 0.0)
+SLOT_DETECTED = 0
+#: slot entries 1-2, ``ⁱp_j`` (m, Σ_i, noisy)
+SLOT_P_BODY = slice(1, 3)
+#: slot entries 3-4, ``(cos, sin)(θ_j − θ_i)`` (noisy)
+SLOT_YAW_CS = slice(3, 5)
+#: cue entries 0-1, the robot's own position (m, Σ_w)
+CUE_P_WORLD = slice(0, 2)
+#: cue entries 2-3, ``(cos, sin)`` of its own yaw
+CUE_YAW_CS = slice(2, 4)
+#: cue entries 4-5, ``ⁱq_m`` (coverage) or its own target (crossing) in Σ_i (m)
+CUE_GOAL_BODY = slice(4, 6)
+#: cue entry 6, the density σ (coverage) or the distance to its own target (crossing), m
+CUE_SCALAR = 6
 
 
 @dataclass(frozen=True)
@@ -138,7 +161,8 @@ class ObservationLayout:
             (rad), float64; an undetected slot holds the env's zeros (its yaw is 0).
         """
         s = self.slots(obs).astype(np.float64)
-        return s[..., 0] > 0.5, s[..., 1:3], np.arctan2(s[..., 4], s[..., 3])
+        cs = s[..., SLOT_YAW_CS]
+        return s[..., SLOT_DETECTED] > 0.5, s[..., SLOT_P_BODY], np.arctan2(cs[..., 1], cs[..., 0])
 
     def decode(self, obs: np.ndarray) -> Detections:
         """Detections contained in one observation vector.
@@ -159,11 +183,12 @@ class ObservationLayout:
         """``(..., 3)`` the robot's own world pose ``[x m, y m, yaw rad]`` from its cue
         (``obs`` ``(..., size)``)."""
         c = self.cue(obs).astype(np.float64)
-        return np.stack([c[..., 0], c[..., 1], np.arctan2(c[..., 3], c[..., 2])], -1)
+        p, cs = c[..., CUE_P_WORLD], c[..., CUE_YAW_CS]
+        return np.stack([p[..., 0], p[..., 1], np.arctan2(cs[..., 1], cs[..., 0])], -1)
 
     def goal_body(self, obs: np.ndarray) -> np.ndarray:
         """``(..., 2)`` q_m (coverage) or the own target (crossing) in Σ_i (m)."""
-        return self.cue(obs)[..., 4:6].astype(np.float64)
+        return self.cue(obs)[..., CUE_GOAL_BODY].astype(np.float64)
 
 
 def action_to_velocity(

@@ -79,7 +79,17 @@ from typing import Any
 import numpy as np
 
 from fov_marl.baselines.registry import register_policy
-from fov_marl.spaces import CUE_SIZE, SLOT_SIZE
+from fov_marl.spaces import (
+    CUE_GOAL_BODY,
+    CUE_P_WORLD,
+    CUE_SCALAR,
+    CUE_SIZE,
+    CUE_YAW_CS,
+    SLOT_DETECTED,
+    SLOT_P_BODY,
+    SLOT_SIZE,
+    SLOT_YAW_CS,
+)
 from fov_marl.validation import check_bool, check_real, check_real_sequence, describe
 
 __all__ = [
@@ -154,24 +164,24 @@ def neighbour_features(slots: np.ndarray, scale_m: float) -> tuple[np.ndarray, n
     all-zero features and mask 0 (module docstring, "Features").
     """
     slots = np.asarray(slots, dtype=np.float64)
-    mask = (slots[..., 0] > 0.5).astype(np.float64)
-    xy = slots[..., 1:3] / scale_m
+    mask = (slots[..., SLOT_DETECTED] > 0.5).astype(np.float64)
+    xy = slots[..., SLOT_P_BODY] / scale_m
     d = np.sqrt(np.sum(xy * xy, axis=-1, keepdims=True))
-    feat = np.concatenate([xy, slots[..., 3:5], d], axis=-1) * mask[..., None]
+    feat = np.concatenate([xy, slots[..., SLOT_YAW_CS], d], axis=-1) * mask[..., None]
     return feat, mask
 
 
 def cue_features(cue: np.ndarray, centre_m: np.ndarray, half_m: float) -> np.ndarray:
     """``(..., 8)`` cue features of cues ``(..., 7)`` (module docstring, "Features")."""
     cue = np.asarray(cue, dtype=np.float64)
-    q = cue[..., 4:6] / half_m
+    q = cue[..., CUE_GOAL_BODY] / half_m
     return np.concatenate(
         [
-            (cue[..., 0:2] - np.asarray(centre_m, dtype=np.float64)) / half_m,
-            cue[..., 2:4],
+            (cue[..., CUE_P_WORLD] - np.asarray(centre_m, dtype=np.float64)) / half_m,
+            cue[..., CUE_YAW_CS],
             q,
             np.sqrt(np.sum(q * q, axis=-1, keepdims=True)),
-            cue[..., 6:7] / half_m,
+            cue[..., CUE_SCALAR, None] / half_m,
         ],
         axis=-1,
     )

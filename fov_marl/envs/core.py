@@ -34,7 +34,15 @@ from fov_marl.config import ScenarioConfig
 from fov_marl.envs.world import Camera, crossing_layout, sample_initial_poses, step_poses
 from fov_marl.geometry import world_to_body
 from fov_marl.metrics import CoverageMetric, StripCoverageMetric, pairwise_distances_batch
-from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, action_to_velocity
+from fov_marl.spaces import (
+    CUE_GOAL_BODY,
+    CUE_P_WORLD,
+    CUE_SCALAR,
+    CUE_SIZE,
+    CUE_YAW_CS,
+    SLOT_SIZE,
+    action_to_velocity,
+)
 from fov_marl.validation import ConfigError
 
 __all__ = ["BatchedCore", "CoverageCore", "CrossingCore", "noise_chunk_steps", "CORES"]
@@ -292,11 +300,10 @@ class BatchedCore:
         blocks = self.camera.neighbour_blocks_from_noise(poses, self._take_noise(idx))
         goal_body = world_to_body(self._goal_world(idx), poses)
         cue = np.empty((b, n, CUE_SIZE))
-        cue[..., 0:2] = poses[..., :2]
-        cue[..., 2] = np.cos(poses[..., 2])
-        cue[..., 3] = np.sin(poses[..., 2])
-        cue[..., 4:6] = goal_body
-        cue[..., 6] = self._cue_scalar(goal_body)
+        cue[..., CUE_P_WORLD] = poses[..., :2]
+        cue[..., CUE_YAW_CS] = np.stack([np.cos(poses[..., 2]), np.sin(poses[..., 2])], -1)
+        cue[..., CUE_GOAL_BODY] = goal_body
+        cue[..., CUE_SCALAR] = self._cue_scalar(goal_body)
         full = np.concatenate([blocks.reshape(b, n, -1), cue], axis=-1).astype(np.float32)
         # Only float32 round-off can cross the documented bounds; keep contains() exact.
         np.clip(full, self.obs_low, self.obs_high, out=full)

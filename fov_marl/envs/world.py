@@ -26,7 +26,7 @@ from fov_marl.geometry import (
     world_to_body,
     wrap_angle,
 )
-from fov_marl.spaces import SLOT_SIZE
+from fov_marl.spaces import SLOT_DETECTED, SLOT_P_BODY, SLOT_SIZE, SLOT_YAW_CS
 
 __all__ = [
     "step_poses",
@@ -212,10 +212,8 @@ class Camera:
         dyaw = wrap_angle(dyaw_true + nz[:, 2] * std[2])
         xy = p_body[pair]
         vals = np.empty((j.size, SLOT_SIZE))
-        vals[:, 0] = 1.0
-        vals[:, 1] = xy[:, 0] + nz[:, 0] * std[0]
-        vals[:, 2] = xy[:, 1] + nz[:, 1] * std[1]
-        vals[:, 3] = np.cos(dyaw)
-        vals[:, 4] = np.sin(dyaw)
+        vals[:, SLOT_DETECTED] = 1.0
+        vals[:, SLOT_P_BODY] = xy + nz[:, :2] * std[:2]
+        vals[:, SLOT_YAW_CS] = np.stack([np.cos(dyaw), np.sin(dyaw)], -1)
         out[det_s] = vals
         return out

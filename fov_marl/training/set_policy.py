@@ -90,7 +90,17 @@ from torch import nn
 
 from fov_marl.baselines.learned import CUE_FEATURES, MODEL_FORMAT, NEIGHBOUR_FEATURES
 from fov_marl.infos import METRICS_PREFIX
-from fov_marl.spaces import CUE_SIZE, SLOT_SIZE
+from fov_marl.spaces import (
+    CUE_GOAL_BODY,
+    CUE_P_WORLD,
+    CUE_SCALAR,
+    CUE_SIZE,
+    CUE_YAW_CS,
+    SLOT_DETECTED,
+    SLOT_P_BODY,
+    SLOT_SIZE,
+    SLOT_YAW_CS,
+)
 
 __all__ = [
     "SetActorCritic",
@@ -135,22 +145,22 @@ def split_obs(obs: torch.Tensor, ctde: bool) -> tuple[torch.Tensor, torch.Tensor
 
 
 def _entry_features(slots: torch.Tensor, scale: float) -> tuple[torch.Tensor, torch.Tensor]:
-    mask = (slots[..., 0] > 0.5).to(slots.dtype)
-    xy = slots[..., 1:3] / scale
+    mask = (slots[..., SLOT_DETECTED] > 0.5).to(slots.dtype)
+    xy = slots[..., SLOT_P_BODY] / scale
     d = torch.sqrt((xy * xy).sum(-1, keepdim=True))
-    feat = torch.cat([xy, slots[..., 3:5], d], dim=-1) * mask.unsqueeze(-1)
+    feat = torch.cat([xy, slots[..., SLOT_YAW_CS], d], dim=-1) * mask.unsqueeze(-1)
     return feat, mask
 
 
 def _cue_features(cue: torch.Tensor, centre: torch.Tensor, half: float) -> torch.Tensor:
-    q = cue[..., 4:6] / half
+    q = cue[..., CUE_GOAL_BODY] / half
     return torch.cat(
         [
-            (cue[..., 0:2] - centre) / half,
-            cue[..., 2:4],
+            (cue[..., CUE_P_WORLD] - centre) / half,
+            cue[..., CUE_YAW_CS],
             q,
             torch.sqrt((q * q).sum(-1, keepdim=True)),
-            cue[..., 6:7] / half,
+            cue[..., CUE_SCALAR, None] / half,
         ],
         dim=-1,
     )
@@ -343,8 +353,8 @@ def agent_centric_state(obs: np.ndarray) -> np.ndarray:
     obs = np.asarray(obs, dtype=np.float64)
     B, N, _ = obs.shape
     m = N - 1
-    cue = obs[..., SLOT_SIZE * m : SLOT_SIZE * m + 4]
-    p, c, s = cue[..., 0:2], cue[..., 2], cue[..., 3]
+    cue = obs[..., SLOT_SIZE * m :]
+    p, c, s = cue[..., CUE_P_WORLD], cue[..., CUE_YAW_CS][..., 0], cue[..., CUE_YAW_CS][..., 1]
     d = p[:, None, :, :] - p[:, :, None, :]  # (B, i, k, 2) world, p_k - p_i
     ci, si = c[:, :, None], s[:, :, None]
     ck, sk = c[:, None, :], s[:, None, :]
