@@ -132,6 +132,9 @@ class EpisodeRecord:
     Behind the filter, ``intervention_causes`` is the share of robot-steps changed for
     each cause of :data:`fov_marl.infos.SAFETY_CAUSES` (a step may have several, so the
     shares can add up to more than ``intervention_rate``).
+    ``max_distance_m`` is the largest distance two robots of the episode's arena can be
+    apart, ``√2 (L − 2 r)`` (:func:`summarize` clips ``min_distance``'s interval to it;
+    None in records written before it existed).
     ``eta_series`` and ``min_distance_series`` hold one value at reset and one per step
     (sample k at ``k · dt_s``). ``min_distance`` (and its series) is inf for a one-robot
     team (no pair; :meth:`to_json` writes it as None, :func:`summarize` leaves it out).
@@ -169,6 +172,7 @@ class EpisodeRecord:
     time_to_eta_norm_s: float | None = None
     arrived_ever: int | None = None
     mean_time_to_arrive_s: float | None = None
+    max_distance_m: float | None = None
     cpu_ms_by_stage: dict[str, float] | None = None
     cpu_ms_by_robot: list[float] | None = None
     eta_series: list[float] = field(default_factory=list, repr=False)
@@ -398,6 +402,7 @@ def run_episode(
         t_norm = time_to_eta(eta_series, dt, min(ETA_NORM_THRESHOLD * eta_opt, 1.0))
     arrived_any = ~np.isnan(first_arrival)
     return EpisodeRecord(
+        max_distance_m=math.sqrt(2.0) * (cfg.arena_size_m - 2.0 * cfg.robot_radius_m),
         seed=seed,
         scenario=scenario,
         policy=name,
@@ -757,7 +762,8 @@ def summarize(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     """Mean, std (ddof=1), 95% t-interval, min and max of every summary field.
 
     The interval is clipped to the field's feasible range (:data:`FEASIBLE`; robots
-    arrived also to ``[0, n_agents]``) and is None with fewer than two values.
+    arrived also to ``[0, n_agents]``, ``min_distance`` also to the records' largest
+    ``max_distance_m`` where every record has one) and is None with fewer than two values.
     ``time_to_eta_99``, ``time_to_eta_norm_s`` and ``time_to_arrival_s`` ignore episodes
     that never got there and report how many in ``missing``. Likewise every statistic
     is over the finite values only: ``min_distance`` of a one-robot team is inf (no
@@ -775,6 +781,8 @@ def summarize(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
         lo, hi = FEASIBLE.get(f, (-_INF, _INF))
         if f in ("arrived", "arrived_ever"):
             hi = min(hi, float(n_max))
+        if f == "min_distance" and records and all(r.max_distance_m for r in records):
+            hi = min(hi, max(float(r.max_distance_m) for r in records))
         out[f] = _stats(vals, (lo, hi))
     causes = [r.intervention_causes for r in records if r.intervention_causes is not None]
     if causes:

@@ -164,3 +164,24 @@ def test_cpu_split_adds_up_with_and_without_the_filter(safety_filter):
     assert per.sum() / 2 == pytest.approx(r.cpu_ms_per_robot_step, rel=1e-6)
     if safety_filter:
         assert stages["filter"] > 0
+
+
+def test_min_distance_interval_stays_inside_the_arena():
+    """The t-interval of a few widely spread minimum distances was clipped only at 0: its
+    upper end could lie beyond the arena's diagonal (no two robots are ever that far)."""
+    import dataclasses
+
+    from fov_marl.config import make_config
+
+    r = run_episode("coverage", "random", 0, **TINY)
+    L = r.max_distance_m
+    cfg = make_config()
+    assert L == pytest.approx(math.sqrt(2.0) * (cfg.arena_size_m - 2 * cfg.robot_radius_m))
+    far = [dataclasses.replace(r, min_distance=d) for d in (0.1 * L, 0.2 * L, 0.99 * L)]
+    s = summarize(far)["min_distance"]
+    assert s["ci95"][1] == pytest.approx(L)  # unclipped it would be about 2.1 L
+    assert s["ci95"][0] == 0.0
+    # records from before the field (None): the old bound, [0, inf)
+    old = [dataclasses.replace(x, max_distance_m=None) for x in far]
+    assert summarize(old)["min_distance"]["ci95"][1] > 1.5 * L
+    assert EpisodeRecord.from_json({**r.to_json(), "max_distance_m": None}).max_distance_m is None
