@@ -202,3 +202,45 @@ def test_tracker_bank_threads_and_their_errors(monkeypatch):
     monkeypatch.setattr(T._BankCore, "step", boom)
     with pytest.raises(FloatingPointError, match="chunk failed"):
         b.step(np.zeros((4, 3)), obs)
+
+
+def _forked_step(conn) -> None:  # runs in a forked child
+    env = fov_coverage_v0.parallel_env(n_agents=4)
+    obs = _obs(env, env.reset(seed=2)[0])
+    bank = TrackerBank(
+        env.unwrapped.config, TrackerParams(n_particles_total=200), seed=1, n_threads=2
+    )
+    bank.reset(obs)
+    bank.step(np.full((4, 3), 0.3), obs)
+    conn.send_bytes(bank.estimate().mean_body.tobytes())
+    conn.close()
+
+
+def test_threaded_bank_in_a_forked_child(monkeypatch):
+    """A child forked after the parent's pool exists gets a pool of its own (the parent's
+    worker threads do not exist in the child: submitting to them would hang)."""
+    import multiprocessing as mp
+
+    import fov_marl.estimation.tracker as T
+
+    if "fork" not in mp.get_all_start_methods():
+        pytest.skip("no fork on this platform")
+    monkeypatch.setattr(T, "CHUNK_PARTICLES", 400)
+    env = fov_coverage_v0.parallel_env(n_agents=4)
+    obs = _obs(env, env.reset(seed=2)[0])
+    bank = TrackerBank(
+        env.unwrapped.config, TrackerParams(n_particles_total=200), seed=1, n_threads=2
+    )
+    bank.reset(obs)
+    bank.step(np.full((4, 3), 0.3), obs)  # the parent's pool now exists
+    ctx = mp.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    child = ctx.Process(target=_forked_step, args=(send,))
+    child.start()
+    got = recv.recv_bytes() if recv.poll(60) else None
+    child.join(10)
+    if child.is_alive():
+        child.kill()
+    assert got is not None, "the forked child hung stepping a threaded bank"
+    assert child.exitcode == 0
+    assert got == bank.estimate().mean_body.tobytes()
