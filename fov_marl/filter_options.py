@@ -143,7 +143,7 @@ def filter_kwargs(
         if not safety_filter:
             raise ValueError(f"--filter-threads sets the safety filter's options: {off_hint}")
         text = str(threads).strip()
-        if not text.isdigit() or not 1 <= int(text) <= 1024:
+        if not (text.isascii() and text.isdigit()) or not 1 <= int(text) <= 1024:
             raise ValueError(f"--filter-threads must be an integer in [1, 1024], got {threads!r}")
         out["tracker_threads"] = int(text)
     return out or None

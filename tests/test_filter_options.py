@@ -202,7 +202,7 @@ def test_filter_threads_flag(tmp_path, capsys):
         "tracker_params": {"n_particles_total": 300},
         "tracker_threads": 1,
     }
-    for bad in ("0", "1025", "1.5", "-1", "two", ""):
+    for bad in ("0", "1025", "1.5", "-1", "two", "", "²", "١"):
         with pytest.raises(ValueError, match=r"--filter-threads must be an integer in \[1, 1024\]"):
             filter_kwargs(None, None, True, threads=bad)
     with pytest.raises(ValueError, match="--filter-threads.*--safety-filter"):

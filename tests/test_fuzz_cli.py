@@ -453,6 +453,12 @@ SPECS: dict[str, dict[str, dict]] = {
         "--scenario": {"bad": ["maze", ""], "good": ["coverage", "crossing"]},
         "--safety-filter": {"bad": ["--safety-filter=1"], "good": [None]},
         **FILTER_SPECS_OFF,
+        # without --safety-filter every value is an error naming the flag
+        "--filter-threads": {
+            "bad": ["0", "-1", "abc", "", "1.5", "1025", "1e3", "nan", "²"],
+            "good": [],
+            "either": ["1", "2"],
+        },
         "--belief": {"bad": ["--belief=1"], "good": [None]},
         "--belief-init": {"bad": ["x", "", "KNOWN"], "good": ["known", "uniform"]},
         "--timesteps": {
