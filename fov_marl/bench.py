@@ -653,17 +653,14 @@ def bench_ppo(
                     base = one("per_copy", int(per_copy_envs), filt, p_t)
                     base["ratio"] = 1.0
                     rows.append(base)
+                # (workers, tracker threads): every W on 1 thread, then T > 1 in 1 process
+                runs = [(int(w), 1) for w in workers]
+                runs += [(1, int(t)) for t in (tracker_threads if filt else ()) if int(t) > 1]
                 for b in n_envs:
-                    for w in workers:
-                        if int(w) > int(b):
+                    for w, t in runs:
+                        if w > int(b):
                             continue
-                        r = one("vector", int(b), filt, p_t, int(w))
-                        r["ratio"] = r["samples_per_s"] / base["samples_per_s"] if base else None
-                        rows.append(r)
-                    for t in tracker_threads if filt else ():
-                        if int(t) == 1:
-                            continue
-                        r = one("vector", int(b), filt, p_t, 1, int(t))
+                        r = one("vector", int(b), filt, p_t, w, t)
                         r["ratio"] = r["samples_per_s"] / base["samples_per_s"] if base else None
                         rows.append(r)
     finally:
@@ -875,24 +872,16 @@ def run_benchmarks(
             rows.append({"section": "vector_filter", "policy": policy, **r})
     # the whole filtered step over 1 and 2 processes (SubprocVectorEnv), B N = 384
     rows.extend(bench_filtered_step(steps=5 if quick else 20, warmup=1 if quick else 5))
-    # the filter at the reduced particle budget, at B N = 384 (the figure)
-    for r in bench_batched_filter(
-        n_copies=(64,),
-        steps=3 if quick else 10,
-        warmup=1 if quick else 2,
-        looped=False,
-        tracker_overrides={"n_particles_total": FAST_FILTER_PARTICLES},
-    ):
-        rows.append({"section": "vector_filter", "policy": "filter", **r})
-    # the same two budgets with the tracker on 2 threads (wall time; same actions)
-    for p_t in (2000, FAST_FILTER_PARTICLES):
+    # at B N = 384 (the figure): the reduced particle budget, and both budgets
+    # with the tracker on 2 threads (wall time; same actions)
+    for p_t, threads in ((FAST_FILTER_PARTICLES, 1), (2000, 2), (FAST_FILTER_PARTICLES, 2)):
         for r in bench_batched_filter(
             n_copies=(64,),
             steps=3 if quick else 10,
             warmup=1 if quick else 2,
             looped=False,
             tracker_overrides={"n_particles_total": p_t},
-            tracker_threads=2,
+            tracker_threads=threads,
         ):
             rows.append({"section": "vector_filter", "policy": "filter", **r})
     if ppo:
