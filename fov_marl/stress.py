@@ -47,6 +47,15 @@ seeds of it (``SeedSequence([seed + k, 1])`` / ``[seed + k, 2]``) for the start 
 and the adversary; ``workers > 1`` spreads the episodes over processes and gives
 the same rows as ``workers=1``.
 
+A long sweep can be stopped and resumed: with ``checkpoint=PATH`` (``fov-marl stress
+--checkpoint PATH``) every finished episode is appended to ``PATH`` as one JSON line
+(its case, seed, steps and measurements), and the episodes already there are not run
+again. Since every number is a function of the case and the seed, a resumed sweep
+gives the same rows as one that was never stopped (tested). A line holds the
+``fov_marl`` version that wrote it; a checkpoint from another version is refused,
+because its episodes were measured on other code. Within one version the file cannot
+tell code changes apart: start a new file after changing the filter.
+
 :func:`default_cases` gives the issue-10 acceptance grid (``full=True``) or a
 representative small subset (``full=False``); :func:`format_stress_table` prints
 rows; :func:`add_stress_parser` / :func:`cmd_stress` are the ``fov-marl stress``
@@ -85,6 +94,7 @@ from __future__ import annotations
 import argparse
 import collections
 import itertools
+import json
 import os
 import sys
 import time
@@ -102,7 +112,7 @@ from fov_marl.adversaries import (
     make_start_poses,
 )
 from fov_marl.infos import SAFETY_CAUSES, cause_counts, metrics_of, safety_of
-from fov_marl.jsonio import write_json
+from fov_marl.jsonio import jsonable, write_json
 from fov_marl.metrics import chatter_flips
 from fov_marl.validation import (
     MAX_SEED,
@@ -136,6 +146,16 @@ HEAD_ON_PAIR_ADVERSARIES: tuple[str, ...] = ("straight", "head_on")
 
 _SCENARIOS = ("coverage", "crossing")
 _START_STREAM, _POLICY_STREAM = 1, 2
+#: the ``format`` entry of a checkpoint line (:func:`run_stress`'s ``checkpoint``)
+CHECKPOINT_FORMAT = "fov_marl.stress/episode-1"
+#: the entries of an episode record (:func:`run_stress_episode`)
+_EPISODE_KEYS = frozenset(
+    (
+        "seed steps robot_steps collisions first_collision_step violation_events "
+        "violation_robot_steps min_distance_m intervened action_change_sum fallbacks "
+        "statuses cause_counts chatter_events filter_chatter_events"
+    ).split()
+)
 
 
 @dataclass(frozen=True)
@@ -460,6 +480,7 @@ def run_stress(
     *,
     backend: str = "local",
     ray_address: str | None = None,
+    checkpoint: str | os.PathLike | None = None,
 ) -> list[dict[str, Any]]:
     """Run every case for ``episodes`` seeded episodes of ``steps`` steps.
 
@@ -478,13 +499,19 @@ def run_stress(
             (an episode that ends early counts its whole budget of ``steps``).
         backend: ``"local"`` or ``"ray"``; the rows do not depend on it.
         ray_address: an existing Ray cluster for ``backend="ray"``.
+        checkpoint: a JSON-lines file (module docstring): the episodes already in it
+            (same case, seed and steps) are read instead of run, and every episode
+            run here is appended as it finishes. Created when missing; a last line cut
+            off by a stopped run is dropped. The rows are those of a run without it.
 
     Returns:
         One dict per case, in the order given (keys in the module docstring, plus the
         case's fields).
 
     Raises:
-        ValueError: a bad case or argument (naming it).
+        ValueError: a bad case or argument (naming it); a checkpoint that cannot be
+            read, holds a line that is not an episode, or was written by another
+            ``fov_marl`` version (naming the file and the line).
     """
     from fov_marl.backends import map_jobs
 
@@ -509,8 +536,17 @@ def run_stress(
         for c_idx, case in enumerate(cases)
         for k in range(episodes)
     ]
+    results: list[dict[str, Any] | None] = [None] * len(jobs)
+    sink = None
+    if checkpoint is not None:
+        stored, sink = _open_checkpoint(checkpoint)
+        for j, (_, case, s_j, n_j) in enumerate(jobs):
+            results[j] = stored.get(_episode_key(case, s_j, n_j))
+    todo = [j for j in range(len(jobs)) if results[j] is None]
     total = len(jobs) * int(steps)
-    state = {"done": 0, "this": 0}
+    state = {"done": (len(jobs) - len(todo)) * int(steps), "this": 0}
+    if progress is not None and state["done"]:
+        progress(state["done"], total)
 
     def on_step() -> None:
         state["done"] += 1
@@ -521,29 +557,163 @@ def run_stress(
     def on_result(k: int, res: tuple[int, dict[str, Any]]) -> None:
         state["done"] += int(steps) - state["this"]
         state["this"] = 0
+        if sink is not None:
+            _, case, s_k, n_k = jobs[todo[k]]
+            _append_episode(sink, case, s_k, n_k, res[1])
         if progress is not None:
             progress(state["done"], total)
 
+    run = [jobs[j] for j in todo]
     # biggest teams first so a pool does not wait on one long tail job
     order = sorted(
-        range(len(jobs)), key=lambda k: (-jobs[k][1].n_agents * (1 + 3 * jobs[k][1].filtered), k)
+        range(len(run)), key=lambda k: (-run[k][1].n_agents * (1 + 3 * run[k][1].filtered), k)
     )
-    out = map_jobs(
-        _job,
-        jobs,
-        backend=backend,
-        workers=int(workers),
-        ray_address=ray_address,
-        on_result=on_result,
-        local_kwargs={"on_step": on_step} if progress is not None else None,
-        order=order if (workers > 1 or backend != "local") else None,
-    )
-    results = [rec for _, rec in out]
+    try:
+        out = map_jobs(
+            _job,
+            run,
+            backend=backend,
+            workers=int(workers),
+            ray_address=ray_address,
+            on_result=on_result,
+            local_kwargs={"on_step": on_step} if progress is not None else None,
+            order=order if (workers > 1 or backend != "local") else None,
+        )
+    finally:
+        if sink is not None:
+            sink.close()
+    for j, (_, rec) in zip(todo, out, strict=True):
+        results[j] = rec
     rows = []
     for c_idx, case in enumerate(cases):
         eps = results[c_idx * episodes : (c_idx + 1) * episodes]
         rows.append(_aggregate(case, eps, int(steps)))
     return rows
+
+
+# ---------------------------------------------------------------- checkpoints
+def _episode_id(case: StressCase, seed: int, steps: int) -> dict[str, Any]:
+    """One episode's identity as JSON values: its case's fields (``fov_deg`` a float),
+    seed and steps."""
+    d = case.describe()
+    d["fov_deg"] = float(d["fov_deg"])
+    return jsonable({"case": d, "seed": int(seed), "steps": int(steps)})
+
+
+def _key_of(episode_id: Mapping[str, Any]) -> str:
+    """The lookup key of :func:`_episode_id`'s dict (or of one read back from a line)."""
+    ident = {k: episode_id.get(k) for k in ("case", "seed", "steps")}
+    try:
+        return json.dumps(ident, sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError):
+        raise ValueError(
+            "a checkpoint needs cases whose fields are JSON values (numbers, strings, "
+            f"lists, mappings), got {describe(ident['case'])}"
+        ) from None
+
+
+def _episode_key(case: StressCase, seed: int, steps: int) -> str:
+    """The lookup key of one episode in a checkpoint."""
+    return _key_of(_episode_id(case, seed, steps))
+
+
+def _append_episode(sink: Any, case: StressCase, seed: int, steps: int, rec: dict) -> None:
+    """One checkpoint line for a finished episode, flushed at once (a stopped run loses
+    at most the line being written)."""
+    from fov_marl import __version__
+
+    line = {
+        "format": CHECKPOINT_FORMAT,
+        "version": __version__,
+        **_episode_id(case, seed, steps),
+        "record": jsonable(rec),
+    }
+    sink.write(json.dumps(line, allow_nan=False) + "\n")
+    sink.flush()
+
+
+def _read_checkpoint(
+    path: str | os.PathLike, name: str = "checkpoint"
+) -> tuple[dict[str, dict[str, Any]], int]:
+    """The episodes of a checkpoint file (none when it does not exist).
+
+    A last line without its newline that begins as this module's lines do (a run
+    stopped while writing it) is ignored; any other line that is not an episode written
+    by this version raises (so a wrong path is never truncated).
+
+    Args:
+        path: the file. name: how errors name it (the CLI flag).
+
+    Returns:
+        ``({key: record}, n_bytes)``: ``n_bytes`` up to the last complete line.
+
+    Raises:
+        ValueError: naming ``name``, the file and the line that cannot be used.
+    """
+    from fov_marl import __version__
+
+    if isinstance(path, bool) or not isinstance(path, str | os.PathLike) or not str(path).strip():
+        raise ValueError(f"{name} must be a file path, got {describe(path)}")
+    p = Path(path)
+    try:
+        data = p.read_bytes() if p.exists() else b""
+    except OSError as exc:
+        raise ValueError(f"{name} {p}: cannot read it ({exc.strerror or exc})") from None
+    stored: dict[str, dict[str, Any]] = {}
+    complete = data.rfind(b"\n") + 1  # bytes up to the last newline
+    tail = data[complete:].strip()
+    head = json.dumps({"format": CHECKPOINT_FORMAT}).encode()[:-1]  # b'{"format": "…"'
+    if tail and not (head.startswith(tail) or tail.startswith(head)):
+        # not a line this module was writing when it stopped: not a checkpoint at all
+        n = data[:complete].count(b"\n") + 1
+        raise ValueError(f"{name} {p}, line {n}: not a stress episode (an unfinished line)")
+    for n, raw in enumerate(data[:complete].split(b"\n")[:-1], start=1):
+        if not raw.strip():
+            continue
+        where = f"{name} {p}, line {n}"
+        try:
+            item = json.loads(raw.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError):
+            raise ValueError(f"{where}: not a JSON line") from None
+        if not (isinstance(item, dict) and item.get("format") == CHECKPOINT_FORMAT):
+            raise ValueError(f"{where}: not a stress episode (format {CHECKPOINT_FORMAT!r})")
+        if item.get("version") != __version__:
+            raise ValueError(
+                f"{where}: written by fov_marl {item.get('version')!r}, this is "
+                f"{__version__!r}; its episodes were measured on other code, start a new file"
+            )
+        rec = item.get("record")
+        if not (
+            isinstance(item.get("case"), dict)
+            and isinstance(item.get("seed"), int)
+            and isinstance(item.get("steps"), int)
+            and isinstance(rec, dict)
+            and set(rec) == _EPISODE_KEYS
+        ):
+            raise ValueError(
+                f"{where}: not a stress episode (case, seed, steps or record malformed)"
+            )
+        stored[_key_of(item)] = rec
+    return stored, complete
+
+
+def _open_checkpoint(path: str | os.PathLike) -> tuple[dict[str, dict[str, Any]], Any]:
+    """:func:`_read_checkpoint`, then the file opened for appending, a cut-off last
+    line removed first.
+
+    Returns:
+        ``({key: record}, text file opened for appending)``.
+    """
+    stored, complete = _read_checkpoint(path)
+    p = Path(path)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        if p.exists() and p.stat().st_size > complete:
+            os.truncate(p, complete)
+        sink = open(p, "a", encoding="utf-8")  # noqa: SIM115 (run_stress closes it)
+    except OSError as exc:
+        raise ValueError(f"checkpoint {p}: cannot write it ({exc.strerror or exc})") from None
+    return stored, sink
 
 
 # ---------------------------------------------------------------- the grid
@@ -805,6 +975,14 @@ def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
     add_filter_arguments(p, when="unless --no-filter")
     p.add_argument("--json", default=None, metavar="OUT.json", help="also write the rows here")
     p.add_argument(
+        "--checkpoint",
+        default=None,
+        metavar="FILE.jsonl",
+        help="append every finished episode to this file and skip the episodes already in "
+        "it (same case, seed and steps, written by this fov_marl version): a stopped sweep "
+        "resumes with the same rows (default: none)",
+    )
+    p.add_argument(
         "--fail-on-collision",
         action="store_true",
         help="exit status 1 when any case has a collision event",
@@ -937,6 +1115,9 @@ def cmd_stress(args: argparse.Namespace) -> int:
     if args.json is not None and not args.json.strip():
         raise ValueError("--json must be a file path, got ''")
     cases = _cases_from_args(args)
+    if args.checkpoint is not None:  # its lines checked before the sweep, naming the flag
+        _read_checkpoint(args.checkpoint, "--checkpoint")
+        check_writable("--checkpoint", [args.checkpoint])
     if args.json is not None:  # the last check: before the sweep, not after it
         check_writable("--json", [args.json])
     episodes = args.episodes if args.episodes is not None else (20 if args.full else 3)
@@ -957,6 +1138,7 @@ def cmd_stress(args: argparse.Namespace) -> int:
             progress=progress,
             backend=args.backend,
             ray_address=args.ray_address,
+            checkpoint=args.checkpoint,
         )
     finally:
         bar.close()

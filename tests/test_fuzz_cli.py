@@ -627,6 +627,18 @@ SPECS["stress"] = {
         "good": ["OUTFILE.json"],
         "names": ("--json", "afile", "existing_dir"),
     },
+    # a file that is not a checkpoint is refused (and left as it is), whatever it holds
+    "--checkpoint": {
+        "bad": [
+            "{ws}/afile/x.jsonl",
+            "{ws}/existing_dir",
+            "{ws}/badcfg.json",
+            "{ws}/cfg.json",
+            "",
+            "  ",
+        ],
+        "good": ["OUTFILE.jsonl"],
+    },
     "--fail-on-collision": {"bad": ["--fail-on-collision=1"], "good": [None]},
     "--quiet": {"bad": ["--quiet=1"], "good": [None]},
     "--debug": {"bad": ["--debug=1"], "good": [None]},

@@ -1,0 +1,156 @@
+"""``run_stress(checkpoint=...)`` / ``fov-marl stress --checkpoint``: a stopped sweep
+resumes where it stopped, runs only the missing episodes, and gives the rows of a sweep
+that was never stopped; a file that is not a checkpoint of this version is refused
+(naming it and the line) and never truncated."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import pytest
+
+import fov_marl.stress as stress
+from fov_marl import __version__
+from fov_marl.stress import CHECKPOINT_FORMAT, StressCase, add_stress_parser, run_stress
+
+CASES = [
+    StressCase("head_on", 2, 45.0, "head_on_pair"),
+    StressCase("charge_centre", 3, 120.0, "clustered"),
+    StressCase("straight", 2, 90, "head_on_pair", filtered=False),  # int β: same key as 90.0
+]
+KW = {"episodes": 2, "steps": 25, "seed": 11}
+_REAL_JOB = stress._job
+
+
+class _Stop(Exception):
+    pass
+
+
+def _counting(monkeypatch, stop_after: int | None = None) -> list[int]:
+    """Count the episodes run here (``_job`` calls); raise after ``stop_after`` of them."""
+    calls: list[int] = []
+    real = _REAL_JOB
+
+    def job(j, **kw):
+        if stop_after is not None and len(calls) == stop_after:
+            raise _Stop
+        calls.append(j[2])
+        return real(j, **kw)
+
+    monkeypatch.setattr(stress, "_job", job)
+    return calls
+
+
+def _lines(path) -> list[dict]:
+    return [json.loads(t) for t in path.read_text().splitlines() if t.strip()]
+
+
+def test_a_stopped_sweep_resumes_with_the_rows_of_an_unbroken_one(tmp_path, monkeypatch):
+    ref = run_stress(CASES, **KW)
+    ck = tmp_path / "sub" / "sweep.jsonl"
+    calls = _counting(monkeypatch, stop_after=4)
+    with pytest.raises(_Stop):
+        run_stress(CASES, checkpoint=ck, **KW)
+    assert len(calls) == 4 and len(_lines(ck)) == 4  # each episode written as it ended
+    first = _lines(ck)[0]
+    assert first["format"] == CHECKPOINT_FORMAT and first["version"] == __version__
+    assert first["case"]["adversary"] == "head_on" and first["seed"] == 11
+    # a run stopped while writing a line leaves half of it
+    ck.write_text(ck.read_text() + ck.read_text().splitlines()[0][:70])
+    calls = _counting(monkeypatch)
+    seen = []
+    rows = run_stress(CASES, checkpoint=ck, progress=lambda d, t: seen.append((d, t)), **KW)
+    assert rows == ref
+    assert len(calls) == 6 - 4  # only the missing episodes ran
+    assert seen[0] == (4 * 25, 6 * 25) and seen[-1] == (6 * 25, 6 * 25)
+    assert len(_lines(ck)) == 6  # the cut line is gone, the new ones follow
+    # everything stored: nothing runs, the same rows. Episodes are stored by their own
+    # seed: first seed 12 reuses episode 12 and runs only 13
+    calls = _counting(monkeypatch)
+    assert run_stress(CASES, checkpoint=ck, **KW) == ref and calls == []
+    other = run_stress(CASES[:1], checkpoint=ck, **{**KW, "seed": 12})
+    assert calls == [13] and other == run_stress(CASES[:1], **{**KW, "seed": 12})
+
+
+def test_resuming_on_two_workers_gives_the_same_rows(tmp_path):
+    ref = run_stress(CASES, **KW)
+    ck = tmp_path / "sweep.jsonl"
+    run_stress(CASES[1:2], checkpoint=ck, **KW)  # one case's episodes stored
+    assert run_stress(CASES, checkpoint=ck, workers=2, **KW) == ref
+    assert len(_lines(ck)) == 6
+
+
+def _episode_line(**change) -> str:
+    rec = dict.fromkeys(stress._EPISODE_KEYS, 0)
+    line = {
+        "format": CHECKPOINT_FORMAT,
+        "version": __version__,
+        "case": CASES[0].describe(),
+        "seed": 11,
+        "steps": 25,
+        "record": rec,
+        **change,
+    }
+    return json.dumps(line)
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("{not json\n", "line 1: not a JSON line"),
+        (_episode_line() + "\n[1, 2]\n", "line 2: not a stress episode"),
+        (_episode_line(format="other") + "\n", "line 1: not a stress episode"),
+        (_episode_line(version="0.0.1") + "\n", "written by fov_marl '0.0.1'"),
+        (_episode_line(record={"seed": 1}) + "\n", "line 1: .*record malformed"),
+        (_episode_line(seed="11") + "\n", "line 1: .*malformed"),
+        ('{"density_sigma_m": 4.0}', "line 1: not a stress episode"),  # a config file
+        (_episode_line() + "\n\n" + '{"format": "other', "line 3: .*unfinished"),
+    ],
+)
+def test_a_file_that_is_not_a_checkpoint_is_refused_and_left_alone(tmp_path, text, match):
+    path = tmp_path / "x.jsonl"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=match) as exc:
+        run_stress(CASES, checkpoint=path, **KW)
+    assert str(path) in str(exc.value)
+    assert path.read_text() == text
+
+
+@pytest.mark.parametrize("path", ["", "  ", 3, True])
+def test_the_checkpoint_must_be_a_path(path):
+    with pytest.raises(ValueError, match="checkpoint must be a file path"):
+        run_stress(CASES, checkpoint=path, **KW)
+
+
+def test_cases_that_are_not_json_cannot_be_checkpointed(tmp_path):
+    case = StressCase("head_on", 2, 45.0, "head_on_pair", adversary_kwargs={"speed": {1, 2}})
+    with pytest.raises(ValueError, match="JSON values"):
+        run_stress([case], checkpoint=tmp_path / "x.jsonl", **KW)
+
+
+def _cmd(argv: str):
+    p = argparse.ArgumentParser(prog="fov-marl")
+    sub = p.add_subparsers(dest="command", required=True)
+    add_stress_parser(sub)
+    args = p.parse_args(["stress", *argv.split()])
+    return args.func(args)
+
+
+def test_the_cli_resumes_and_names_the_flag(tmp_path, capsys):
+    ck = tmp_path / "grid.jsonl"
+    argv = (
+        "--adversaries head_on,straight --n-agents 2 --fov-deg 120 --starts head_on_pair "
+        f"--episodes 2 --steps 12 --seed 5 --quiet --checkpoint {ck}"
+    )
+    assert _cmd(argv) == 0
+    first = capsys.readouterr().out
+    assert len(_lines(ck)) == 4
+    assert _cmd(argv) == 0
+    assert capsys.readouterr().out == first and len(_lines(ck)) == 4
+    bad = tmp_path / "cfg.json"
+    bad.write_text("{not json\n")
+    with pytest.raises(ValueError, match="--checkpoint .*line 1"):
+        _cmd(argv.replace(str(ck), str(bad)))
+    with pytest.raises(ValueError, match="--checkpoint"):
+        _cmd(argv.replace(str(ck), str(tmp_path)))  # a folder
