@@ -55,6 +55,8 @@ gives the same rows as one that was never stopped (tested). A line holds the
 ``fov_marl`` version that wrote it; a checkpoint from another version is refused,
 because its episodes were measured on other code. Within one version the file cannot
 tell code changes apart: start a new file after changing the filter.
+:func:`stored_rows` gives the rows of the episodes stored so far, without running any;
+``fov-marl stress --checkpoint`` prints them when it is stopped (Ctrl-C).
 
 :func:`default_cases` gives the issue-10 acceptance grid (``full=True``) or a
 representative small subset (``full=False``); :func:`format_stress_table` prints
@@ -127,6 +129,7 @@ __all__ = [
     "StressCase",
     "run_stress",
     "run_stress_episode",
+    "stored_rows",
     "default_cases",
     "format_stress_table",
     "add_stress_parser",
@@ -697,6 +700,39 @@ def _read_checkpoint(
     return stored, complete
 
 
+def stored_rows(
+    cases: Iterable[StressCase | Sequence[Any] | Mapping[str, Any]],
+    episodes: int,
+    steps: int,
+    seed: int,
+    checkpoint: str | os.PathLike,
+) -> tuple[list[dict[str, Any]], int]:
+    """The rows of a sweep from the episodes its checkpoint holds so far, without
+    running any: a case's row aggregates its stored episodes (its ``episodes`` entry
+    says how many); cases with none are left out. ``run_stress`` with the same
+    arguments gives these rows once every episode is stored.
+
+    Returns:
+        ``(rows, number of stored episodes of the sweep)``.
+
+    Raises:
+        ValueError: a bad case or a checkpoint that cannot be used (as :func:`run_stress`).
+    """
+    cases = [StressCase.coerce(c) for c in cases]
+    stored, _ = _read_checkpoint(checkpoint)
+    rows, n = [], 0
+    for case in cases:
+        eps = [
+            rec
+            for k in range(int(episodes))
+            if (rec := stored.get(_episode_key(case, int(seed) + k, int(steps)))) is not None
+        ]
+        n += len(eps)
+        if eps:
+            rows.append(_aggregate(case, eps, int(steps)))
+    return rows, n
+
+
 def _open_checkpoint(path: str | os.PathLike) -> tuple[dict[str, dict[str, Any]], Any]:
     """:func:`_read_checkpoint`, then the file opened for appending, a cut-off last
     line removed first.
@@ -1140,6 +1176,19 @@ def cmd_stress(args: argparse.Namespace) -> int:
             ray_address=args.ray_address,
             checkpoint=args.checkpoint,
         )
+    except KeyboardInterrupt:
+        if args.checkpoint is None:
+            raise
+        bar.close()
+        # what is stored so far, so a stopped sweep still shows its table
+        rows, n_stored = stored_rows(cases, episodes, args.steps, args.seed, args.checkpoint)
+        if rows:
+            print(format_stress_table(rows))
+        sys.stderr.write(
+            f"stopped: {n_stored} of {len(cases) * episodes} episodes are in "
+            f"{args.checkpoint} (the rows above hold those); the same command resumes\n"
+        )
+        raise
     finally:
         bar.close()
     print(format_stress_table(rows))

@@ -12,7 +12,13 @@ import pytest
 
 import fov_marl.stress as stress
 from fov_marl import __version__
-from fov_marl.stress import CHECKPOINT_FORMAT, StressCase, add_stress_parser, run_stress
+from fov_marl.stress import (
+    CHECKPOINT_FORMAT,
+    StressCase,
+    add_stress_parser,
+    run_stress,
+    stored_rows,
+)
 
 CASES = [
     StressCase("head_on", 2, 45.0, "head_on_pair"),
@@ -154,3 +160,42 @@ def test_the_cli_resumes_and_names_the_flag(tmp_path, capsys):
         _cmd(argv.replace(str(ck), str(bad)))
     with pytest.raises(ValueError, match="--checkpoint"):
         _cmd(argv.replace(str(ck), str(tmp_path)))  # a folder
+
+
+def test_stored_rows_are_the_rows_of_the_episodes_stored_so_far(tmp_path, monkeypatch):
+    ref = run_stress(CASES, **KW)
+    ck = tmp_path / "sweep.jsonl"
+    assert stored_rows(CASES, checkpoint=ck, **KW) == ([], 0)
+    _counting(monkeypatch, stop_after=3)
+    with pytest.raises(_Stop):
+        run_stress(CASES, checkpoint=ck, **KW)
+    rows, n = stored_rows(CASES, checkpoint=ck, **KW)
+    assert n == 3 and [r["episodes"] for r in rows] == [2, 1]
+    monkeypatch.setattr(stress, "_job", _REAL_JOB)
+    assert rows[0] == ref[0]  # a complete case: its final row
+    assert rows[1] == run_stress(CASES[1:2], **{**KW, "episodes": 1})[0]
+    run_stress(CASES, checkpoint=ck, **KW)
+    assert stored_rows(CASES, checkpoint=ck, **KW) == (ref, 6)
+
+
+def test_the_cli_stopped_prints_what_it_stored(tmp_path, capsys, monkeypatch):
+    ck = tmp_path / "grid.jsonl"
+    argv = (
+        "--adversaries head_on,straight --n-agents 2 --fov-deg 120 --starts head_on_pair "
+        f"--episodes 2 --steps 12 --seed 5 --quiet --checkpoint {ck}"
+    )
+    assert _cmd(argv.replace("head_on,straight", "straight")) == 0  # one case stored
+    capsys.readouterr()
+
+    def interrupted(*a, **kw):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(stress, "run_stress", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        _cmd(argv)
+    out, err = capsys.readouterr()
+    assert "straight" in out and "head_on " not in out
+    assert f"stopped: 2 of 4 episodes are in {ck}" in err
+    with pytest.raises(KeyboardInterrupt):  # without a checkpoint: nothing to show
+        _cmd(argv.replace(f" --checkpoint {ck}", ""))
+    assert capsys.readouterr() == ("", "")
