@@ -719,17 +719,20 @@ def stored_rows(
         ValueError: a bad case or a checkpoint that cannot be used (as :func:`run_stress`).
     """
     cases = [StressCase.coerce(c) for c in cases]
+    episodes = check_int("episodes", episodes, 1)
+    steps = check_int("steps", steps, 1)
+    seed = check_int("seed", seed, 0)
     stored, _ = _read_checkpoint(checkpoint)
     rows, n = [], 0
     for case in cases:
         eps = [
             rec
-            for k in range(int(episodes))
-            if (rec := stored.get(_episode_key(case, int(seed) + k, int(steps)))) is not None
+            for k in range(episodes)
+            if (rec := stored.get(_episode_key(case, seed + k, steps))) is not None
         ]
         n += len(eps)
         if eps:
-            rows.append(_aggregate(case, eps, int(steps)))
+            rows.append(_aggregate(case, eps, steps))
     return rows, n
 
 

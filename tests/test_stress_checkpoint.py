@@ -199,3 +199,11 @@ def test_the_cli_stopped_prints_what_it_stored(tmp_path, capsys, monkeypatch):
     with pytest.raises(KeyboardInterrupt):  # without a checkpoint: nothing to show
         _cmd(argv.replace(f" --checkpoint {ck}", ""))
     assert capsys.readouterr() == ("", "")
+
+
+@pytest.mark.parametrize(
+    "kw, name", [({"episodes": 0}, "episodes"), ({"steps": "3"}, "steps"), ({"seed": -1}, "seed")]
+)
+def test_stored_rows_checks_its_arguments(tmp_path, kw, name):
+    with pytest.raises(ValueError, match=name):
+        stored_rows(CASES, checkpoint=tmp_path / "x.jsonl", **{**KW, **kw})
