@@ -1154,12 +1154,18 @@ def cmd_stress(args: argparse.Namespace) -> int:
     if args.json is not None and not args.json.strip():
         raise ValueError("--json must be a file path, got ''")
     cases = _cases_from_args(args)
+    episodes = args.episodes if args.episodes is not None else (20 if args.full else 3)
+    resumed = 0
     if args.checkpoint is not None:  # its lines checked before the sweep, naming the flag
         _read_checkpoint(args.checkpoint, "--checkpoint")
         check_writable("--checkpoint", [args.checkpoint])
+        resumed = stored_rows(cases, episodes, args.steps, args.seed, args.checkpoint)[1]
+        if resumed and not args.quiet:
+            sys.stderr.write(
+                f"{resumed} of {len(cases) * episodes} episodes read from {args.checkpoint}\n"
+            )
     if args.json is not None:  # the last check: before the sweep, not after it
         check_writable("--json", [args.json])
-    episodes = args.episodes if args.episodes is not None else (20 if args.full else 3)
     workers = args.workers or ((os.cpu_count() or 1) if args.backend == "ray" else 1)
     t0 = time.perf_counter()
     bar = progress_bar(len(cases) * episodes * args.steps, "stress", "step", not args.quiet)
@@ -1202,7 +1208,9 @@ def cmd_stress(args: argparse.Namespace) -> int:
         settings = {k: v for k, v in vars(args).items() if k not in ("func",) and not callable(v)}
         out = {
             "settings": {**settings, "episodes": episodes},
+            # wall_s is this run's: the episodes read from --checkpoint ran earlier
             "wall_s": time.perf_counter() - t0,
+            "episodes_from_checkpoint": resumed,
             "rows": rows,
         }
         write_json(path, out, indent=2)

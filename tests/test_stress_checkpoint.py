@@ -149,11 +149,16 @@ def test_the_cli_resumes_and_names_the_flag(tmp_path, capsys):
         "--adversaries head_on,straight --n-agents 2 --fov-deg 120 --starts head_on_pair "
         f"--episodes 2 --steps 12 --seed 5 --quiet --checkpoint {ck}"
     )
-    assert _cmd(argv) == 0
+    out = tmp_path / "rows.json"
+    assert _cmd(f"{argv} --json {out}") == 0
     first = capsys.readouterr().out
-    assert len(_lines(ck)) == 4
-    assert _cmd(argv) == 0
-    assert capsys.readouterr().out == first and len(_lines(ck)) == 4
+    assert len(_lines(ck)) == 4 and json.loads(out.read_text())["episodes_from_checkpoint"] == 0
+    assert _cmd(f"{argv} --json {out}") == 0
+    again = capsys.readouterr().out
+    assert again == first and len(_lines(ck)) == 4
+    assert json.loads(out.read_text())["episodes_from_checkpoint"] == 4
+    assert _cmd(argv.replace(" --quiet", "")) == 0
+    assert f"4 of 4 episodes read from {ck}" in capsys.readouterr().err
     bad = tmp_path / "cfg.json"
     bad.write_text("{not json\n")
     with pytest.raises(ValueError, match="--checkpoint .*line 1"):
