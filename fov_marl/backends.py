@@ -129,6 +129,10 @@ def map_jobs(
         order: submission order (indices into ``jobs``), e.g. the longest jobs first;
             default the job order. The results do not depend on it.
 
+    A ``KeyboardInterrupt`` (or a job's error) with local processes cancels the jobs not
+    started and kills the running ones before it propagates: the jobs that finished
+    before it have reached ``on_result``, no other job does.
+
     Raises:
         ValueError: a bad backend or argument, or Ray missing (see :func:`check_backend`).
     """
@@ -155,14 +159,34 @@ def map_jobs(
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
         ctx = multiprocessing.get_context("spawn") if "torch" in sys.modules else None
-        with ProcessPoolExecutor(max_workers=min(workers, n), mp_context=ctx) as ex:
+        ex = ProcessPoolExecutor(max_workers=min(workers, n), mp_context=ctx)
+        try:
             futs = {ex.submit(fn, jobs[k]): k for k in idx}
             for f in as_completed(futs):
                 done(futs[f], f.result())
+        except BaseException:
+            _stop_pool(ex)
+            raise
+        ex.shutdown()
     else:
         for k in idx:
             done(k, fn(jobs[k], **(local_kwargs or {})))
     return results
+
+
+def _stop_pool(ex: Any) -> None:
+    """Stop a process pool at once (Ctrl-C, or a job's error): the jobs not started are
+    cancelled and the running ones killed. ``ProcessPoolExecutor``'s own exit waits for
+    every submitted job, so a Ctrl-C ran the rest of a sweep and then discarded it."""
+    # no public API kills a pool's workers; _processes is there from Python 3.8 to 3.14
+    # (shutdown() sets it to None, so it is read first)
+    procs = list((getattr(ex, "_processes", None) or {}).values())
+    ex.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
+        if proc.is_alive():
+            proc.terminate()
+    for proc in procs:
+        proc.join(timeout=5.0)
 
 
 def _map_ray(

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import sys
+import time
+from pathlib import Path
 
 import pytest
 
@@ -18,6 +20,35 @@ WALL_CLOCK = {"cpu_ms_per_robot_step", "cpu_ms_per_robot_step_std", "cpu_ms_by_s
 
 def _square(x: int) -> int:
     return x * x
+
+
+def _mark_and_sleep(job: tuple[str, int]) -> int:
+    folder, k = job
+    (Path(folder) / f"started_{k}").touch()
+    time.sleep(1.0)
+    return k
+
+
+def test_map_jobs_interrupted_stops_its_processes(tmp_path):
+    """Ctrl-C (here raised by ``on_result`` after the first job) stops the pool at once:
+    the jobs not started never start, the running ones are killed. The pool's own exit
+    used to wait for all 12 jobs and then drop their results (red team of the stress
+    checkpoint: a sweep on 2 workers ran to its end after Ctrl-C and lost it)."""
+    import multiprocessing
+
+    seen = []
+
+    def on_result(k: int, r: int) -> None:
+        seen.append(k)
+        raise KeyboardInterrupt
+
+    jobs = [(str(tmp_path), k) for k in range(12)]
+    with pytest.raises(KeyboardInterrupt):
+        map_jobs(_mark_and_sleep, jobs, workers=2, on_result=on_result)
+    assert len(seen) == 1
+    # 2 running + at most the 2 the workers took when the first two ended
+    assert len(list(tmp_path.glob("started_*"))) <= 4
+    assert not [c for c in multiprocessing.active_children() if c.is_alive()]
 
 
 def test_map_jobs_local_keeps_job_order_for_any_worker_count():
