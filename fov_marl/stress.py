@@ -52,9 +52,10 @@ A long sweep can be stopped and resumed: with ``checkpoint=PATH`` (``fov-marl st
 (its case, seed, steps and measurements), and the episodes already there are not run
 again. Since every number is a function of the case and the seed, a resumed sweep
 gives the same rows as one that was never stopped (tested). A line holds the
-``fov_marl`` version that wrote it; a checkpoint from another version is refused,
-because its episodes were measured on other code. Within one version the file cannot
-tell code changes apart: start a new file after changing the filter.
+``fov_marl`` version and a hash of the package's Python source that wrote it
+(:func:`code_id`); a checkpoint from other code is refused, because its episodes were
+measured on it (the version alone stays the same across commits). Records are checked
+entry by entry, and a file that is not a checkpoint is refused and left as it is.
 :func:`stored_rows` gives the rows of the episodes stored so far, without running any;
 ``fov-marl stress --checkpoint`` prints them when it is stopped (Ctrl-C).
 
@@ -97,6 +98,7 @@ import argparse
 import collections
 import itertools
 import json
+import math
 import os
 import sys
 import time
@@ -130,6 +132,7 @@ __all__ = [
     "run_stress",
     "run_stress_episode",
     "stored_rows",
+    "code_id",
     "default_cases",
     "format_stress_table",
     "add_stress_parser",
@@ -542,9 +545,9 @@ def run_stress(
     results: list[dict[str, Any] | None] = [None] * len(jobs)
     sink = None
     if checkpoint is not None:
+        keys = [_episode_key(case, s_j, n_j) for _, case, s_j, n_j in jobs]  # may raise
         stored, sink = _open_checkpoint(checkpoint)
-        for j, (_, case, s_j, n_j) in enumerate(jobs):
-            results[j] = stored.get(_episode_key(case, s_j, n_j))
+        results = [stored.get(k) for k in keys]
     todo = [j for j in range(len(jobs)) if results[j] is None]
     total = len(jobs) * int(steps)
     state = {"done": (len(jobs) - len(todo)) * int(steps), "this": 0}
@@ -597,10 +600,10 @@ def run_stress(
 # ---------------------------------------------------------------- checkpoints
 def _episode_id(case: StressCase, seed: int, steps: int) -> dict[str, Any]:
     """One episode's identity as JSON values: its case's fields (``fov_deg`` a float),
-    seed and steps."""
+    seed and steps (non-finite floats kept: :func:`_key_of` refuses them)."""
     d = case.describe()
     d["fov_deg"] = float(d["fov_deg"])
-    return jsonable({"case": d, "seed": int(seed), "steps": int(steps)})
+    return jsonable({"case": d, "seed": int(seed), "steps": int(steps)}, nonfinite_as_none=False)
 
 
 def _key_of(episode_id: Mapping[str, Any]) -> str:
@@ -610,14 +613,33 @@ def _key_of(episode_id: Mapping[str, Any]) -> str:
         return json.dumps(ident, sort_keys=True, allow_nan=False)
     except (TypeError, ValueError):
         raise ValueError(
-            "a checkpoint needs cases whose fields are JSON values (numbers, strings, "
-            f"lists, mappings), got {describe(ident['case'])}"
+            "a checkpoint needs cases whose fields are JSON values (finite numbers, "
+            f"strings, lists, mappings), got {describe(ident['case'])}"
         ) from None
 
 
 def _episode_key(case: StressCase, seed: int, steps: int) -> str:
     """The lookup key of one episode in a checkpoint."""
     return _key_of(_episode_id(case, seed, steps))
+
+
+_CODE_ID: list[str] = []
+
+
+def code_id() -> str:
+    """12 hex digits of SHA-256 over the package's Python source (each ``*.py`` file's
+    path and bytes, in path order): the code that measured a checkpoint's episodes.
+    The package version alone (``__version__``) stays the same across commits."""
+    if not _CODE_ID:
+        import hashlib
+
+        root = Path(__file__).resolve().parent
+        h = hashlib.sha256()
+        for f in sorted(root.rglob("*.py")):
+            h.update(f.relative_to(root).as_posix().encode() + b"\0")
+            h.update(f.read_bytes() + b"\0")
+        _CODE_ID.append(h.hexdigest()[:12])
+    return _CODE_ID[0]
 
 
 def _append_episode(sink: Any, case: StressCase, seed: int, steps: int, rec: dict) -> None:
@@ -628,6 +650,7 @@ def _append_episode(sink: Any, case: StressCase, seed: int, steps: int, rec: dic
     line = {
         "format": CHECKPOINT_FORMAT,
         "version": __version__,
+        "code": code_id(),
         **_episode_id(case, seed, steps),
         "record": jsonable(rec),
     }
@@ -635,20 +658,66 @@ def _append_episode(sink: Any, case: StressCase, seed: int, steps: int, rec: dic
     sink.flush()
 
 
+def _nonneg_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and v >= 0
+
+
+def _finite_nonneg(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and 0.0 <= v < math.inf
+
+
+def _record_problem(rec: Any, filtered: Any, seed: int, steps: int) -> str | None:
+    """What is wrong with a stored episode record (None when it is one
+    :func:`run_stress_episode` can have returned for that seed and steps)."""
+    if not isinstance(rec, dict) or set(rec) != _EPISODE_KEYS:
+        return "its record does not have the entries of an episode"
+    if rec["seed"] != seed or not (_nonneg_int(rec["steps"]) and 1 <= rec["steps"] <= steps):
+        return "its record's seed or steps differ from the line's"
+    counts = ("robot_steps", "collisions", "violation_events", "violation_robot_steps")
+    bad = [k for k in (*counts, "chatter_events") if not _nonneg_int(rec[k])]
+    fcs = rec["first_collision_step"]
+    if fcs is not None and not (_nonneg_int(fcs) and fcs >= 1):
+        bad.append("first_collision_step")
+    if rec["min_distance_m"] is not None and not _finite_nonneg(rec["min_distance_m"]):
+        bad.append("min_distance_m")
+    fields = ("intervened", "fallbacks", "filter_chatter_events", "action_change_sum")
+    if filtered is not True:
+        bad += [k for k in (*fields, "statuses", "cause_counts") if rec[k] is not None]
+    else:
+        bad += [k for k in fields[:3] if not _nonneg_int(rec[k])]
+        if not _finite_nonneg(rec["action_change_sum"]):
+            bad.append("action_change_sum")
+        st = rec["statuses"]
+        if not (isinstance(st, dict) and all(_nonneg_int(v) for v in st.values())):
+            bad.append("statuses")
+        cc = rec["cause_counts"]
+        if not (
+            isinstance(cc, list)
+            and len(cc) == len(SAFETY_CAUSES)
+            and all(_nonneg_int(v) for v in cc)
+        ):
+            bad.append("cause_counts")
+    return f"its record's {', '.join(bad)} cannot be an episode's" if bad else None
+
+
 def _read_checkpoint(
     path: str | os.PathLike, name: str = "checkpoint"
-) -> tuple[dict[str, dict[str, Any]], int]:
+) -> tuple[dict[str, dict[str, Any]], int, bool]:
     """The episodes of a checkpoint file (none when it does not exist).
 
-    A last line without its newline that begins as this module's lines do (a run
-    stopped while writing it) is ignored; any other line that is not an episode written
-    by this version raises (so a wrong path is never truncated).
+    Every line must be an episode written by this package version and code
+    (:func:`code_id`), with a record :func:`run_stress_episode` can have returned. The
+    last line may lack its newline: when it is such an episode it counts; when it is the
+    beginning of one (a run stopped while writing it, after at least one whole line) it
+    is ignored. Anything else raises, so a file that is not a checkpoint (a wrong path)
+    is never truncated or appended to.
 
     Args:
         path: the file. name: how errors name it (the CLI flag).
 
     Returns:
-        ``({key: record}, n_bytes)``: ``n_bytes`` up to the last complete line.
+        ``({key: record}, n_bytes, add_newline)``: the bytes to keep (a cut-off last line
+        is dropped), and whether a newline must be written before the next line.
 
     Raises:
         ValueError: naming ``name``, the file and the line that cannot be used.
@@ -659,18 +728,30 @@ def _read_checkpoint(
         raise ValueError(f"{name} must be a file path, got {describe(path)}")
     p = Path(path)
     try:
+        if p.exists() and not p.is_file():
+            raise ValueError(f"{name} {p}: not a regular file")
         data = p.read_bytes() if p.exists() else b""
     except OSError as exc:
         raise ValueError(f"{name} {p}: cannot read it ({exc.strerror or exc})") from None
+    lines = data.split(b"\n")  # the last item: what follows the last newline
+    tail = lines.pop()
+    keep, add_newline = len(data), False
+    if tail.strip():
+        try:
+            json.loads(tail.decode("utf-8"))
+            lines.append(tail)  # a whole line without its newline: checked below
+            add_newline = True
+        except (UnicodeDecodeError, json.JSONDecodeError):
+            head = json.dumps({"format": CHECKPOINT_FORMAT}).encode()[:-1]  # b'{"format": "…"'
+            stripped = tail.strip()
+            started = stripped.startswith(head)
+            if not (started or (head.startswith(stripped) and any(x.strip() for x in lines))):
+                raise ValueError(
+                    f"{name} {p}, line {len(lines) + 1}: not a stress episode (an unfinished line)"
+                ) from None
+            keep = len(data) - len(tail)
     stored: dict[str, dict[str, Any]] = {}
-    complete = data.rfind(b"\n") + 1  # bytes up to the last newline
-    tail = data[complete:].strip()
-    head = json.dumps({"format": CHECKPOINT_FORMAT}).encode()[:-1]  # b'{"format": "…"'
-    if tail and not (head.startswith(tail) or tail.startswith(head)):
-        # not a line this module was writing when it stopped: not a checkpoint at all
-        n = data[:complete].count(b"\n") + 1
-        raise ValueError(f"{name} {p}, line {n}: not a stress episode (an unfinished line)")
-    for n, raw in enumerate(data[:complete].split(b"\n")[:-1], start=1):
+    for n, raw in enumerate(lines, start=1):
         if not raw.strip():
             continue
         where = f"{name} {p}, line {n}"
@@ -680,24 +761,20 @@ def _read_checkpoint(
             raise ValueError(f"{where}: not a JSON line") from None
         if not (isinstance(item, dict) and item.get("format") == CHECKPOINT_FORMAT):
             raise ValueError(f"{where}: not a stress episode (format {CHECKPOINT_FORMAT!r})")
-        if item.get("version") != __version__:
+        if item.get("version") != __version__ or item.get("code") != code_id():
             raise ValueError(
-                f"{where}: written by fov_marl {item.get('version')!r}, this is "
-                f"{__version__!r}; its episodes were measured on other code, start a new file"
+                f"{where}: written by fov_marl {item.get('version')!r} with code "
+                f"{item.get('code')!r}, this is {__version__!r} with code {code_id()!r}; its "
+                "episodes were measured on other code, start a new file"
             )
-        rec = item.get("record")
-        if not (
-            isinstance(item.get("case"), dict)
-            and isinstance(item.get("seed"), int)
-            and isinstance(item.get("steps"), int)
-            and isinstance(rec, dict)
-            and set(rec) == _EPISODE_KEYS
-        ):
-            raise ValueError(
-                f"{where}: not a stress episode (case, seed, steps or record malformed)"
-            )
-        stored[_key_of(item)] = rec
-    return stored, complete
+        case, seed, steps = item.get("case"), item.get("seed"), item.get("steps")
+        if not (isinstance(case, dict) and _nonneg_int(seed) and _nonneg_int(steps)):
+            raise ValueError(f"{where}: not a stress episode (its case, seed or steps)")
+        problem = _record_problem(item.get("record"), case.get("filtered"), seed, steps)
+        if problem is not None:
+            raise ValueError(f"{where}: not a stress episode ({problem})")
+        stored[_key_of(item)] = item["record"]
+    return stored, keep, add_newline
 
 
 def stored_rows(
@@ -722,7 +799,7 @@ def stored_rows(
     episodes = check_int("episodes", episodes, 1)
     steps = check_int("steps", steps, 1)
     seed = check_int("seed", seed, 0)
-    stored, _ = _read_checkpoint(checkpoint)
+    stored = _read_checkpoint(checkpoint)[0]
     rows, n = [], 0
     for case in cases:
         eps = [
@@ -737,19 +814,21 @@ def stored_rows(
 
 
 def _open_checkpoint(path: str | os.PathLike) -> tuple[dict[str, dict[str, Any]], Any]:
-    """:func:`_read_checkpoint`, then the file opened for appending, a cut-off last
-    line removed first.
+    """:func:`_read_checkpoint`, then the file opened for appending: a cut-off last line
+    removed first, or a newline added after a whole last line that lacks it.
 
     Returns:
         ``({key: record}, text file opened for appending)``.
     """
-    stored, complete = _read_checkpoint(path)
+    stored, keep, add_newline = _read_checkpoint(path)
     p = Path(path)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
-        if p.exists() and p.stat().st_size > complete:
-            os.truncate(p, complete)
+        if p.exists() and p.stat().st_size > keep:
+            os.truncate(p, keep)
         sink = open(p, "a", encoding="utf-8")  # noqa: SIM115 (run_stress closes it)
+        if add_newline:
+            sink.write("\n")
     except OSError as exc:
         raise ValueError(f"checkpoint {p}: cannot write it ({exc.strerror or exc})") from None
     return stored, sink
@@ -1018,7 +1097,7 @@ def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
         default=None,
         metavar="FILE.jsonl",
         help="append every finished episode to this file and skip the episodes already in "
-        "it (same case, seed and steps, written by this fov_marl version): a stopped sweep "
+        "it (same case, seed and steps, written by this fov_marl code): a stopped sweep "
         "resumes with the same rows (default: none)",
     )
     p.add_argument(
@@ -1156,6 +1235,10 @@ def cmd_stress(args: argparse.Namespace) -> int:
     cases = _cases_from_args(args)
     episodes = args.episodes if args.episodes is not None else (20 if args.full else 3)
     resumed = 0
+    if args.checkpoint is not None and args.json is not None:
+        a, b = (os.path.realpath(x) for x in (args.checkpoint, args.json))
+        if a == b:
+            raise ValueError(f"--json and --checkpoint must be different files, both are {a}")
     if args.checkpoint is not None:  # its lines checked before the sweep, naming the flag
         _read_checkpoint(args.checkpoint, "--checkpoint")
         check_writable("--checkpoint", [args.checkpoint])
@@ -1228,6 +1311,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(["stress", *(sys.argv[1:] if argv is None else argv)])
     try:
         return args.func(args)
+    except KeyboardInterrupt:
+        if os.environ.get("FOV_MARL_DEBUG"):
+            raise
+        sys.stderr.write("fov_marl.stress: interrupted\n")
+        return 130
     except ValueError as exc:
         if os.environ.get("FOV_MARL_DEBUG"):
             raise

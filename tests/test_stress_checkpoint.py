@@ -6,7 +6,10 @@ that was never stopped; a file that is not a checkpoint of this version is refus
 from __future__ import annotations
 
 import argparse
+import functools
 import json
+import math
+import os
 
 import pytest
 
@@ -16,6 +19,7 @@ from fov_marl.stress import (
     CHECKPOINT_FORMAT,
     StressCase,
     add_stress_parser,
+    code_id,
     run_stress,
     stored_rows,
 )
@@ -87,15 +91,20 @@ def test_resuming_on_two_workers_gives_the_same_rows(tmp_path):
     assert len(_lines(ck)) == 6
 
 
-def _episode_line(**change) -> str:
-    rec = dict.fromkeys(stress._EPISODE_KEYS, 0)
+@functools.cache
+def _record() -> dict:
+    return stress.run_stress_episode(CASES[0], 11, 25)
+
+
+def _episode_line(record_change: dict | None = None, **change) -> str:
     line = {
         "format": CHECKPOINT_FORMAT,
         "version": __version__,
+        "code": code_id(),
         "case": CASES[0].describe(),
         "seed": 11,
         "steps": 25,
-        "record": rec,
+        "record": {**_record(), **(record_change or {})},
         **change,
     }
     return json.dumps(line)
@@ -108,10 +117,21 @@ def _episode_line(**change) -> str:
         (_episode_line() + "\n[1, 2]\n", "line 2: not a stress episode"),
         (_episode_line(format="other") + "\n", "line 1: not a stress episode"),
         (_episode_line(version="0.0.1") + "\n", "written by fov_marl '0.0.1'"),
-        (_episode_line(record={"seed": 1}) + "\n", "line 1: .*record malformed"),
-        (_episode_line(seed="11") + "\n", "line 1: .*malformed"),
+        (_episode_line(code="0123456789ab") + "\n", "with code '0123456789ab'"),
+        (_episode_line(record={"seed": 1}) + "\n", "line 1: .*entries of an episode"),
+        (_episode_line(seed="11") + "\n", "line 1: .*its case, seed or steps"),
+        (_episode_line({"seed": 12}) + "\n", "record's seed or steps differ"),
+        (_episode_line({"steps": 26}) + "\n", "record's seed or steps differ"),
+        (_episode_line({"collisions": "0"}) + "\n", "record's collisions cannot"),
+        (_episode_line({"collisions": -5}) + "\n", "record's collisions cannot"),
+        (_episode_line({"min_distance_m": math.nan}) + "\n", "min_distance_m cannot"),
+        (_episode_line({"cause_counts": [1]}) + "\n", "cause_counts cannot"),
+        (_episode_line({"statuses": [1]}) + "\n", "statuses cannot"),
+        (_episode_line({"intervened": None}) + "\n", "intervened cannot"),
         ('{"density_sigma_m": 4.0}', "line 1: not a stress episode"),  # a config file
         (_episode_line() + "\n\n" + '{"format": "other', "line 3: .*unfinished"),
+        ("{", "line 1: .*unfinished"),  # the start of a line, but no episode before it
+        ('\n\n{"f', "line 3: .*unfinished"),
     ],
 )
 def test_a_file_that_is_not_a_checkpoint_is_refused_and_left_alone(tmp_path, text, match):
@@ -165,6 +185,23 @@ def test_the_cli_resumes_and_names_the_flag(tmp_path, capsys):
         _cmd(argv.replace(str(ck), str(bad)))
     with pytest.raises(ValueError, match="--checkpoint"):
         _cmd(argv.replace(str(ck), str(tmp_path)))  # a folder
+    link = tmp_path / "link.jsonl"
+    link.symlink_to(ck)
+    before = ck.read_text()
+    for same in (ck, link):  # --json would overwrite the checkpoint
+        with pytest.raises(ValueError, match="--json and --checkpoint must be different"):
+            _cmd(f"{argv} --json {same}")
+    assert ck.read_text() == before
+
+
+def test_python_m_stress_stopped_exits_130(monkeypatch, capsys):
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(stress, "cmd_stress", interrupted)
+    monkeypatch.delenv("FOV_MARL_DEBUG", raising=False)
+    assert stress.main(["--quick"]) == 130
+    assert "interrupted" in capsys.readouterr().err
 
 
 def test_stored_rows_are_the_rows_of_the_episodes_stored_so_far(tmp_path, monkeypatch):
@@ -212,3 +249,33 @@ def test_the_cli_stopped_prints_what_it_stored(tmp_path, capsys, monkeypatch):
 def test_stored_rows_checks_its_arguments(tmp_path, kw, name):
     with pytest.raises(ValueError, match=name):
         stored_rows(CASES, checkpoint=tmp_path / "x.jsonl", **{**KW, **kw})
+
+
+def test_a_whole_last_line_without_its_newline_counts(tmp_path, monkeypatch):
+    ck = tmp_path / "x.jsonl"
+    ck.write_text(_episode_line())  # as an editor may save it
+    calls = _counting(monkeypatch)
+    rows = run_stress(CASES[:1], checkpoint=ck, **KW)
+    assert calls == [12] and rows == run_stress(CASES[:1], **KW)
+    assert len(_lines(ck)) == 2 and ck.read_text().endswith("}\n")
+
+
+def test_non_finite_case_fields_cannot_be_checkpointed_and_create_no_file(tmp_path):
+    for bad in (math.inf, math.nan, -math.inf):
+        case = StressCase("charge_centre", 2, 120.0, "clustered", start_kwargs={"side_m": bad})
+        with pytest.raises(ValueError, match="finite numbers"):
+            run_stress([case], checkpoint=tmp_path / "sub" / "x.jsonl", **KW)
+    assert not (tmp_path / "sub").exists()
+
+
+def test_a_checkpoint_must_be_a_regular_file(tmp_path):
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    for path in (fifo, tmp_path):
+        with pytest.raises(ValueError, match="not a regular file"):
+            run_stress(CASES, checkpoint=path, **KW)
+
+
+def test_the_code_id_is_a_hash_of_the_package_source():
+    assert len(code_id()) == 12 and int(code_id(), 16) >= 0
+    assert code_id() == code_id()
