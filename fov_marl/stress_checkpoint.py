@@ -1,0 +1,238 @@
+"""The file format of resumable stress sweeps (:func:`fov_marl.stress.run_stress`'s
+``checkpoint``, ``fov-marl stress --checkpoint``).
+
+A checkpoint is a JSON-lines file: one line per finished episode, holding ``format``
+(:data:`CHECKPOINT_FORMAT`), ``version`` (``fov_marl.__version__``), ``code``
+(:func:`code_id`), the episode's ``case`` (:meth:`~fov_marl.stress.StressCase.describe`,
+``fov_deg`` a float), ``seed`` and ``steps``, and its ``record``
+(:func:`~fov_marl.stress.run_stress_episode`'s dict). Lines are appended and flushed as
+episodes end; a reader keys them by case, seed and steps. Every line is checked (format,
+the same version and code, a record an episode can have produced); a file with any other
+line is refused and never written to.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from fov_marl.infos import SAFETY_CAUSES
+from fov_marl.jsonio import jsonable
+from fov_marl.validation import describe
+
+__all__ = ["CHECKPOINT_FORMAT", "code_id"]
+
+#: the ``format`` entry of a checkpoint line (:func:`run_stress`'s ``checkpoint``)
+CHECKPOINT_FORMAT = "fov_marl.stress/episode-1"
+#: the entries of an episode record (:func:`~fov_marl.stress.run_stress_episode`)
+EPISODE_KEYS = frozenset(
+    (
+        "seed steps robot_steps collisions first_collision_step violation_events "
+        "violation_robot_steps min_distance_m intervened action_change_sum fallbacks "
+        "statuses cause_counts chatter_events filter_chatter_events"
+    ).split()
+)
+
+
+def episode_id(case: Any, seed: int, steps: int) -> dict[str, Any]:
+    """One episode's identity as JSON values: its case's fields (``fov_deg`` a float),
+    seed and steps (non-finite floats kept: :func:`key_of` refuses them)."""
+    d = case.describe()
+    d["fov_deg"] = float(d["fov_deg"])
+    return jsonable({"case": d, "seed": int(seed), "steps": int(steps)}, nonfinite_as_none=False)
+
+
+def key_of(episode_id: Mapping[str, Any]) -> str:
+    """The lookup key of :func:`episode_id`'s dict (or of one read back from a line)."""
+    ident = {k: episode_id.get(k) for k in ("case", "seed", "steps")}
+    try:
+        return json.dumps(ident, sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError):
+        raise ValueError(
+            "a checkpoint needs cases whose fields are JSON values (finite numbers, "
+            f"strings, lists, mappings), got {describe(ident['case'])}"
+        ) from None
+
+
+def episode_key(case: Any, seed: int, steps: int) -> str:
+    """The lookup key of one episode in a checkpoint."""
+    return key_of(episode_id(case, seed, steps))
+
+
+_CODE_ID: list[str] = []
+
+
+def code_id() -> str:
+    """12 hex digits of SHA-256 over the package's Python source (each ``*.py`` file's
+    path and bytes, in path order): the code that measured a checkpoint's episodes.
+    The package version alone (``__version__``) stays the same across commits."""
+    if not _CODE_ID:
+        import hashlib
+
+        root = Path(__file__).resolve().parent
+        h = hashlib.sha256()
+        for f in sorted(root.rglob("*.py")):
+            h.update(f.relative_to(root).as_posix().encode() + b"\0")
+            h.update(f.read_bytes() + b"\0")
+        _CODE_ID.append(h.hexdigest()[:12])
+    return _CODE_ID[0]
+
+
+def append_episode(sink: Any, case: Any, seed: int, steps: int, rec: dict) -> None:
+    """One checkpoint line for a finished episode, flushed at once (a stopped run loses
+    at most the line being written)."""
+    from fov_marl import __version__
+
+    line = {
+        "format": CHECKPOINT_FORMAT,
+        "version": __version__,
+        "code": code_id(),
+        **episode_id(case, seed, steps),
+        "record": jsonable(rec),
+    }
+    sink.write(json.dumps(line, allow_nan=False) + "\n")
+    sink.flush()
+
+
+def _nonneg_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and v >= 0
+
+
+def _finite_nonneg(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and 0.0 <= v < math.inf
+
+
+def record_problem(rec: Any, filtered: Any, seed: int, steps: int) -> str | None:
+    """What is wrong with a stored episode record (None when it is one
+    :func:`~fov_marl.stress.run_stress_episode` can have returned for that seed and steps)."""
+    if not isinstance(rec, dict) or set(rec) != EPISODE_KEYS:
+        return "its record does not have the entries of an episode"
+    if rec["seed"] != seed or not (_nonneg_int(rec["steps"]) and 1 <= rec["steps"] <= steps):
+        return "its record's seed or steps differ from the line's"
+    counts = ("robot_steps", "collisions", "violation_events", "violation_robot_steps")
+    bad = [k for k in (*counts, "chatter_events") if not _nonneg_int(rec[k])]
+    fcs = rec["first_collision_step"]
+    if fcs is not None and not (_nonneg_int(fcs) and fcs >= 1):
+        bad.append("first_collision_step")
+    if rec["min_distance_m"] is not None and not _finite_nonneg(rec["min_distance_m"]):
+        bad.append("min_distance_m")
+    fields = ("intervened", "fallbacks", "filter_chatter_events", "action_change_sum")
+    if filtered is not True:
+        bad += [k for k in (*fields, "statuses", "cause_counts") if rec[k] is not None]
+    else:
+        bad += [k for k in fields[:3] if not _nonneg_int(rec[k])]
+        if not _finite_nonneg(rec["action_change_sum"]):
+            bad.append("action_change_sum")
+        st = rec["statuses"]
+        if not (isinstance(st, dict) and all(_nonneg_int(v) for v in st.values())):
+            bad.append("statuses")
+        cc = rec["cause_counts"]
+        if not (
+            isinstance(cc, list)
+            and len(cc) == len(SAFETY_CAUSES)
+            and all(_nonneg_int(v) for v in cc)
+        ):
+            bad.append("cause_counts")
+    return f"its record's {', '.join(bad)} cannot be an episode's" if bad else None
+
+
+def read_checkpoint(
+    path: str | os.PathLike, name: str = "checkpoint"
+) -> tuple[dict[str, dict[str, Any]], int, bool]:
+    """The episodes of a checkpoint file (none when it does not exist).
+
+    Every line must be an episode written by this package version and code
+    (:func:`code_id`), with a record :func:`~fov_marl.stress.run_stress_episode` can have returned. The
+    last line may lack its newline: when it is such an episode it counts; when it is the
+    beginning of one (a run stopped while writing it, after at least one whole line) it
+    is ignored. Anything else raises, so a file that is not a checkpoint (a wrong path)
+    is never truncated or appended to.
+
+    Args:
+        path: the file. name: how errors name it (the CLI flag).
+
+    Returns:
+        ``({key: record}, n_bytes, add_newline)``: the bytes to keep (a cut-off last line
+        is dropped), and whether a newline must be written before the next line.
+
+    Raises:
+        ValueError: naming ``name``, the file and the line that cannot be used.
+    """
+    from fov_marl import __version__
+
+    if isinstance(path, bool) or not isinstance(path, str | os.PathLike) or not str(path).strip():
+        raise ValueError(f"{name} must be a file path, got {describe(path)}")
+    p = Path(path)
+    try:
+        if p.exists() and not p.is_file():
+            raise ValueError(f"{name} {p}: not a regular file")
+        data = p.read_bytes() if p.exists() else b""
+    except OSError as exc:
+        raise ValueError(f"{name} {p}: cannot read it ({exc.strerror or exc})") from None
+    lines = data.split(b"\n")  # the last item: what follows the last newline
+    tail = lines.pop()
+    keep, add_newline = len(data), False
+    if tail.strip():
+        try:
+            json.loads(tail.decode("utf-8"))
+            lines.append(tail)  # a whole line without its newline: checked below
+            add_newline = True
+        except (UnicodeDecodeError, json.JSONDecodeError):
+            head = json.dumps({"format": CHECKPOINT_FORMAT}).encode()[:-1]  # b'{"format": "…"'
+            stripped = tail.strip()
+            started = stripped.startswith(head)
+            if not (started or (head.startswith(stripped) and any(x.strip() for x in lines))):
+                raise ValueError(
+                    f"{name} {p}, line {len(lines) + 1}: not a stress episode (an unfinished line)"
+                ) from None
+            keep = len(data) - len(tail)
+    stored: dict[str, dict[str, Any]] = {}
+    for n, raw in enumerate(lines, start=1):
+        if not raw.strip():
+            continue
+        where = f"{name} {p}, line {n}"
+        try:
+            item = json.loads(raw.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError):
+            raise ValueError(f"{where}: not a JSON line") from None
+        if not (isinstance(item, dict) and item.get("format") == CHECKPOINT_FORMAT):
+            raise ValueError(f"{where}: not a stress episode (format {CHECKPOINT_FORMAT!r})")
+        if item.get("version") != __version__ or item.get("code") != code_id():
+            raise ValueError(
+                f"{where}: written by fov_marl {item.get('version')!r} with code "
+                f"{item.get('code')!r}, this is {__version__!r} with code {code_id()!r}; its "
+                "episodes were measured on other code, start a new file"
+            )
+        case, seed, steps = item.get("case"), item.get("seed"), item.get("steps")
+        if not (isinstance(case, dict) and _nonneg_int(seed) and _nonneg_int(steps)):
+            raise ValueError(f"{where}: not a stress episode (its case, seed or steps)")
+        problem = record_problem(item.get("record"), case.get("filtered"), seed, steps)
+        if problem is not None:
+            raise ValueError(f"{where}: not a stress episode ({problem})")
+        stored[key_of(item)] = item["record"]
+    return stored, keep, add_newline
+
+
+def open_checkpoint(path: str | os.PathLike) -> tuple[dict[str, dict[str, Any]], Any]:
+    """:func:`read_checkpoint`, then the file opened for appending: a cut-off last line
+    removed first, or a newline added after a whole last line that lacks it.
+
+    Returns:
+        ``({key: record}, text file opened for appending)``.
+    """
+    stored, keep, add_newline = read_checkpoint(path)
+    p = Path(path)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        if p.exists() and p.stat().st_size > keep:
+            os.truncate(p, keep)
+        sink = open(p, "a", encoding="utf-8")  # noqa: SIM115 (the caller closes it)
+        if add_newline:
+            sink.write("\n")
+    except OSError as exc:
+        raise ValueError(f"checkpoint {p}: cannot write it ({exc.strerror or exc})") from None
+    return stored, sink
