@@ -224,6 +224,7 @@ def open_checkpoint(path: str | os.PathLike) -> tuple[dict[str, dict[str, Any]],
     Returns:
         ``({key: record}, text file opened for appending)``.
     """
+    code_id()  # hashed now, before the sweep: not from files edited while it runs
     stored, keep, add_newline = read_checkpoint(path)
     p = Path(path)
     try:
