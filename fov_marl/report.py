@@ -49,6 +49,7 @@ from fov_marl.evaluation import (
     run_episode,
     summarize,
 )
+from fov_marl.fingerprint import source_fingerprint
 from fov_marl.jsonio import write_json
 
 __all__ = ["reproduce", "PAPER", "plan", "Job", "OUTPUT_FILES"]
@@ -197,15 +198,7 @@ def plan(quick: bool = False, seeds: int | None = None) -> dict[str, Any]:
 
 def _code_fingerprint() -> str:
     """sha256 of the package sources that decide an episode (not this report's own)."""
-    root = Path(__file__).resolve().parent
-    h = hashlib.sha256()
-    for p in sorted(root.rglob("*.py")):
-        rel = p.relative_to(root).as_posix()
-        if rel in _NOT_EPISODE or rel.startswith("training/"):
-            continue
-        h.update(rel.encode())
-        h.update(p.read_bytes())
-    return h.hexdigest()
+    return source_fingerprint({*_NOT_EPISODE, "training/"})
 
 
 def _git_state() -> dict[str, Any]:

@@ -52,9 +52,10 @@ A long sweep can be stopped and resumed: with ``checkpoint=PATH`` (``fov-marl st
 (its case, seed, steps and measurements), and the episodes already there are not run
 again. Since every number is a function of the case and the seed, a resumed sweep
 gives the same rows as one that was never stopped (tested). A line holds the
-``fov_marl`` version and a hash of the package's Python source that wrote it
-(:func:`code_id`); a checkpoint from other code is refused, because its episodes were
-measured on it (the version alone stays the same across commits). Records are checked
+``fov_marl`` version and a hash of the package's Python source that wrote it, less the
+files that cannot change an episode (:func:`code_id`); a checkpoint from other code is
+refused, because its episodes were measured on it (the version alone stays the same
+across commits). Records are checked
 entry by entry, and a file that is not a checkpoint is refused and left as it is.
 :func:`stored_rows` gives the rows of the episodes stored so far, without running any;
 ``fov-marl stress --checkpoint`` prints them when it is stopped (Ctrl-C).

@@ -20,6 +20,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from fov_marl.fingerprint import source_fingerprint
 from fov_marl.infos import SAFETY_CAUSES
 from fov_marl.jsonio import jsonable
 from fov_marl.validation import describe
@@ -63,23 +64,20 @@ def episode_key(case: Any, seed: int, steps: int) -> str:
     return key_of(episode_id(case, seed, steps))
 
 
-_CODE_ID: list[str] = []
+#: files that cannot change a stress episode (left out of :func:`code_id`)
+NOT_EPISODE: frozenset[str] = frozenset(
+    (
+        "report.py plots.py cli.py demo.py video.py bench.py backends.py tables.py "
+        "stress_checkpoint.py training/"
+    ).split()
+)
 
 
 def code_id() -> str:
-    """12 hex digits of SHA-256 over the package's Python source (each ``*.py`` file's
-    path and bytes, in path order): the code that measured a checkpoint's episodes.
-    The package version alone (``__version__``) stays the same across commits."""
-    if not _CODE_ID:
-        import hashlib
-
-        root = Path(__file__).resolve().parent
-        h = hashlib.sha256()
-        for f in sorted(root.rglob("*.py")):
-            h.update(f.relative_to(root).as_posix().encode() + b"\0")
-            h.update(f.read_bytes() + b"\0")
-        _CODE_ID.append(h.hexdigest()[:12])
-    return _CODE_ID[0]
+    """12 hex digits of :func:`~fov_marl.fingerprint.source_fingerprint` over the
+    package's source less :data:`NOT_EPISODE`: the code that measured a checkpoint's
+    episodes (the package version alone stays the same across commits)."""
+    return source_fingerprint(NOT_EPISODE)[:12]
 
 
 def append_episode(sink: Any, case: Any, seed: int, steps: int, rec: dict) -> None:

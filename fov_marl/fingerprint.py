@@ -1,0 +1,46 @@
+"""Fingerprints of the package's Python source: the code that measured cached episodes.
+
+``fov-marl reproduce`` keys its cached runs on one (:mod:`fov_marl.report`) and
+``fov-marl stress --checkpoint`` stamps every stored episode with one
+(:mod:`fov_marl.stress_checkpoint`), so neither reuses an episode measured by other
+code. The package version alone stays the same across commits. Each caller leaves out
+the files that cannot change its episodes (the report, plots, the CLI), so editing
+those keeps the caches.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Iterable
+from pathlib import Path
+
+__all__ = ["source_fingerprint"]
+
+_MEMO: dict[frozenset[str], str] = {}
+
+
+def source_fingerprint(exclude: Iterable[str] = ()) -> str:
+    """SHA-256 (hex) of the package's ``*.py`` files: each file's path relative to the
+    package (``/``-separated) then its bytes, in path order.
+
+    Args:
+        exclude: files to leave out, as relative paths (``"report.py"``), or folders as
+            prefixes ending in ``/`` (``"training/"``).
+
+    Returns:
+        64 hex digits; computed once per process for each ``exclude`` (the source the
+        process started from, not files edited while it runs).
+    """
+    key = frozenset(exclude)
+    if key not in _MEMO:
+        root = Path(__file__).resolve().parent
+        folders = tuple(e for e in key if e.endswith("/"))
+        h = hashlib.sha256()
+        for p in sorted(root.rglob("*.py")):
+            rel = p.relative_to(root).as_posix()
+            if rel in key or rel.startswith(folders):
+                continue
+            h.update(rel.encode())
+            h.update(p.read_bytes())
+        _MEMO[key] = h.hexdigest()
+    return _MEMO[key]
