@@ -20,23 +20,21 @@ import numpy as np
 __all__ = ["jsonable", "json_text", "write_json"]
 
 
-def jsonable(obj: Any, nonfinite_as_none: bool = True) -> Any:
+def jsonable(obj: Any) -> Any:
     """``obj`` with NumPy values as Python ones and non-finite floats as None.
 
     Dicts (keys kept), lists, tuples and arrays are walked; other objects are returned
-    as they are (``json`` then raises for what it cannot write). With
-    ``nonfinite_as_none=False`` non-finite floats are kept (for a caller that must
-    refuse them rather than write them as null).
+    as they are (``json`` then raises for what it cannot write).
     """
     if isinstance(obj, dict):
-        return {k: jsonable(v, nonfinite_as_none) for k, v in obj.items()}
+        return {k: jsonable(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
-        return [jsonable(v, nonfinite_as_none) for v in obj]
+        return [jsonable(v) for v in obj]
     if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist(), nonfinite_as_none)
+        return jsonable(obj.tolist())
     if isinstance(obj, np.generic):
         obj = obj.item()
-    if nonfinite_as_none and isinstance(obj, float) and not math.isfinite(obj):
+    if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj
 

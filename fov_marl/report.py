@@ -88,7 +88,7 @@ IDEAL_FRACTION = 0.99
 #: Source files that cannot change an episode (left out of the cache fingerprint).
 _NOT_EPISODE = {
     "report.py", "plots.py", "cli.py", "demo.py", "video.py", "bench.py", "stress.py",
-    "backends.py", "tables.py",
+    "backends.py", "tables.py", "stress_checkpoint.py", "fingerprint.py",
 }  # fmt: skip
 
 

@@ -1035,7 +1035,11 @@ def cmd_stress(args: argparse.Namespace) -> int:
     resumed = 0
     if args.checkpoint is not None and args.json is not None:
         a, b = (os.path.realpath(x) for x in (args.checkpoint, args.json))
-        if a == b:
+        try:  # a hard link too
+            same = a == b or os.path.samefile(a, b)
+        except OSError:  # one of them does not exist yet
+            same = False
+        if same:
             raise ValueError(f"--json and --checkpoint must be different files, both are {a}")
     if args.checkpoint is not None:  # its lines checked before the sweep, naming the flag
         read_checkpoint(args.checkpoint, "--checkpoint")
@@ -1074,10 +1078,11 @@ def cmd_stress(args: argparse.Namespace) -> int:
         rows, n_stored = stored_rows(cases, episodes, args.steps, args.seed, args.checkpoint)
         if rows:
             print(format_stress_table(rows))
-        sys.stderr.write(
-            f"stopped: {n_stored} of {len(cases) * episodes} episodes are in "
-            f"{args.checkpoint} (the rows above hold those); the same command resumes\n"
-        )
+            held = f"{n_stored} of {len(cases) * episodes} episodes are in {args.checkpoint} "
+            held += "(the rows above hold those)"
+        else:
+            held = f"no episode of this sweep is in {args.checkpoint} yet"
+        sys.stderr.write(f"stopped: {held}; the same command resumes\n")
         raise
     finally:
         bar.close()

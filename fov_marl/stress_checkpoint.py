@@ -20,8 +20,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from fov_marl.fingerprint import source_fingerprint
-from fov_marl.infos import SAFETY_CAUSES
+from fov_marl.infos import SAFETY_CAUSES, SAFETY_STATUSES
 from fov_marl.jsonio import jsonable
 from fov_marl.validation import describe
 
@@ -44,7 +46,22 @@ def episode_id(case: Any, seed: int, steps: int) -> dict[str, Any]:
     seed and steps (non-finite floats kept: :func:`key_of` refuses them)."""
     d = case.describe()
     d["fov_deg"] = float(d["fov_deg"])
-    return jsonable({"case": d, "seed": int(seed), "steps": int(steps)}, nonfinite_as_none=False)
+    return _plain({"case": d, "seed": int(seed), "steps": int(steps)})
+
+
+def _plain(obj: Any) -> Any:
+    """``obj`` with NumPy values as Python ones, non-finite floats kept (unlike
+    :func:`~fov_marl.jsonio.jsonable`, which writes them as null: two cases differing
+    only in inf and NaN would share a key)."""
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist())
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
 
 
 def key_of(episode_id: Mapping[str, Any]) -> str:
@@ -104,17 +121,33 @@ def _finite_nonneg(v: Any) -> bool:
     return isinstance(v, int | float) and not isinstance(v, bool) and 0.0 <= v < math.inf
 
 
-def record_problem(rec: Any, filtered: Any, seed: int, steps: int) -> str | None:
+def record_problem(
+    rec: Any, filtered: Any, seed: int, steps: int, n_agents: Any = None
+) -> str | None:
     """What is wrong with a stored episode record (None when it is one
     :func:`~fov_marl.stress.run_stress_episode` can have returned for that seed and steps)."""
     if not isinstance(rec, dict) or set(rec) != EPISODE_KEYS:
         return "its record does not have the entries of an episode"
-    if rec["seed"] != seed or not (_nonneg_int(rec["steps"]) and 1 <= rec["steps"] <= steps):
+    n_steps = rec["steps"]
+    if not (_nonneg_int(rec["seed"]) and rec["seed"] == seed) or not (
+        _nonneg_int(n_steps) and 1 <= n_steps <= steps
+    ):
         return "its record's seed or steps differ from the line's"
     counts = ("robot_steps", "collisions", "violation_events", "violation_robot_steps")
     bad = [k for k in (*counts, "chatter_events") if not _nonneg_int(rec[k])]
-    fcs = rec["first_collision_step"]
-    if fcs is not None and not (_nonneg_int(fcs) and fcs >= 1):
+    if (
+        "robot_steps" not in bad
+        and _nonneg_int(n_agents)
+        and rec["robot_steps"] > n_steps * n_agents
+    ):
+        bad.append("robot_steps")
+    fcs, collided = rec["first_collision_step"], rec["collisions"] != 0
+    if "collisions" in bad:
+        pass
+    elif fcs is None:
+        if collided:
+            bad.append("first_collision_step")
+    elif not (_nonneg_int(fcs) and 1 <= fcs <= n_steps and collided):
         bad.append("first_collision_step")
     if rec["min_distance_m"] is not None and not _finite_nonneg(rec["min_distance_m"]):
         bad.append("min_distance_m")
@@ -126,7 +159,11 @@ def record_problem(rec: Any, filtered: Any, seed: int, steps: int) -> str | None
         if not _finite_nonneg(rec["action_change_sum"]):
             bad.append("action_change_sum")
         st = rec["statuses"]
-        if not (isinstance(st, dict) and all(_nonneg_int(v) for v in st.values())):
+        if not (
+            isinstance(st, dict)
+            and set(st) <= set(SAFETY_STATUSES)
+            and all(_nonneg_int(v) for v in st.values())
+        ):
             bad.append("statuses")
         cc = rec["cause_counts"]
         if not (
@@ -175,28 +212,29 @@ def read_checkpoint(
     tail = lines.pop()
     keep, add_newline = len(data), False
     if tail.strip():
-        try:
-            json.loads(tail.decode("utf-8"))
+        if _json_line(tail) is not None:
             lines.append(tail)  # a whole line without its newline: checked below
             add_newline = True
-        except (UnicodeDecodeError, json.JSONDecodeError):
+        else:
+            # the beginning of one line (the file's last write, cut), after a whole line
             head = json.dumps({"format": CHECKPOINT_FORMAT}).encode()[:-1]  # b'{"format": "…"'
             stripped = tail.strip()
-            started = stripped.startswith(head)
-            if not (started or (head.startswith(stripped) and any(x.strip() for x in lines))):
+            one_start = stripped.count(b'{"format"') <= 1 and b"\r" not in stripped
+            begins = stripped.startswith(head) or head.startswith(stripped)
+            if not (begins and one_start and any(x.strip() for x in lines)):
                 raise ValueError(
                     f"{name} {p}, line {len(lines) + 1}: not a stress episode (an unfinished line)"
-                ) from None
+                )
             keep = len(data) - len(tail)
     stored: dict[str, dict[str, Any]] = {}
+    first: dict[str, int] = {}  # key -> line of its first record
     for n, raw in enumerate(lines, start=1):
         if not raw.strip():
             continue
         where = f"{name} {p}, line {n}"
-        try:
-            item = json.loads(raw.decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError):
-            raise ValueError(f"{where}: not a JSON line") from None
+        item = _json_line(raw)
+        if item is None:
+            raise ValueError(f"{where}: not a JSON line")
         if not (isinstance(item, dict) and item.get("format") == CHECKPOINT_FORMAT):
             raise ValueError(f"{where}: not a stress episode (format {CHECKPOINT_FORMAT!r})")
         if item.get("version") != __version__ or item.get("code") != code_id():
@@ -208,11 +246,32 @@ def read_checkpoint(
         case, seed, steps = item.get("case"), item.get("seed"), item.get("steps")
         if not (isinstance(case, dict) and _nonneg_int(seed) and _nonneg_int(steps)):
             raise ValueError(f"{where}: not a stress episode (its case, seed or steps)")
-        problem = record_problem(item.get("record"), case.get("filtered"), seed, steps)
+        problem = record_problem(
+            item.get("record"), case.get("filtered"), seed, steps, case.get("n_agents")
+        )
         if problem is not None:
             raise ValueError(f"{where}: not a stress episode ({problem})")
-        stored[key_of(item)] = item["record"]
+        try:
+            key = key_of(item)
+        except ValueError:
+            raise ValueError(f"{where}: not a stress episode (a non-finite case field)") from None
+        if key in stored and stored[key] != item["record"]:
+            raise ValueError(
+                f"{where}: another record of the episode of line {first[key]} (an episode "
+                "is a function of its case and seed: the file mixes runs)"
+            )
+        first.setdefault(key, n)
+        stored[key] = item["record"]
     return stored, keep, add_newline
+
+
+def _json_line(raw: bytes) -> Any:
+    """The JSON value of one line, or None when it is not one (also for a number too long
+    for ``int``, nesting too deep for the parser, or bytes that are not UTF-8)."""
+    try:
+        return json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError):  # JSONDecodeError is one
+        return None
 
 
 def open_checkpoint(path: str | os.PathLike) -> tuple[dict[str, dict[str, Any]], Any]:

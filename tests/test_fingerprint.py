@@ -36,3 +36,12 @@ def test_stress_code_id_leaves_out_what_cannot_change_an_episode():
     assert code_id() == source_fingerprint(NOT_EPISODE)[:12]
     assert {"cli.py", "stress_checkpoint.py", "training/"} <= NOT_EPISODE
     assert "stress.py" not in NOT_EPISODE and "adversaries.py" not in NOT_EPISODE
+
+
+def test_reproduces_cache_key_leaves_out_the_checkpoint_and_fingerprint_modules():
+    """Neither decides an episode: adding them must not invalidate reproduce's caches
+    (a red team found the key changed when they were added)."""
+    from fov_marl import report
+
+    assert {"stress_checkpoint.py", "fingerprint.py", "stress.py"} <= report._NOT_EPISODE
+    assert report._code_fingerprint() == _reference({*report._NOT_EPISODE, "training/"})

@@ -122,8 +122,8 @@ def _episode_line(record_change: dict | None = None, **change) -> str:
         (_episode_line(seed="11") + "\n", "line 1: .*its case, seed or steps"),
         (_episode_line({"seed": 12}) + "\n", "record's seed or steps differ"),
         (_episode_line({"steps": 26}) + "\n", "record's seed or steps differ"),
-        (_episode_line({"collisions": "0"}) + "\n", "record's collisions cannot"),
-        (_episode_line({"collisions": -5}) + "\n", "record's collisions cannot"),
+        (_episode_line({"collisions": "0"}) + "\n", "record's collisions"),
+        (_episode_line({"collisions": -5}) + "\n", "record's collisions"),
         (_episode_line({"min_distance_m": math.nan}) + "\n", "min_distance_m cannot"),
         (_episode_line({"cause_counts": [1]}) + "\n", "cause_counts cannot"),
         (_episode_line({"statuses": [1]}) + "\n", "statuses cannot"),
@@ -132,15 +132,40 @@ def _episode_line(record_change: dict | None = None, **change) -> str:
         (_episode_line() + "\n\n" + '{"format": "other', "line 3: .*unfinished"),
         ("{", "line 1: .*unfinished"),  # the start of a line, but no episode before it
         ('\n\n{"f', "line 3: .*unfinished"),
+        (_episode_line() + "\r" + _episode_line(), "line 1: .*unfinished"),  # CR, no LF
+        (_episode_line() + "\n" + _episode_line() + _episode_line(), "line 2: .*unfinished"),
+        (
+            '{"format": "fov_marl.stress/episode-1", "n": ' + "9" * 5000 + "}\n",
+            "line 1: not a JSON",
+        ),
+        ("[" * 100_000 + "\n", "line 1: not a JSON line"),
+        (
+            _episode_line(seed=11).replace('"fov_deg": 45.0', '"fov_deg": 1e999') + "\n",
+            "non-finite",
+        ),
+        (
+            _episode_line()
+            + "\n"
+            + _episode_line({"collisions": 1, "first_collision_step": 3})
+            + "\n",
+            "line 2: another record of the episode of line 1",
+        ),
+        (_episode_line({"seed": False}) + "\n", "seed or steps differ"),
+        (_episode_line({"seed": 11.0}) + "\n", "seed or steps differ"),
+        (_episode_line({"collisions": 2}) + "\n", "first_collision_step cannot"),
+        (_episode_line({"collisions": 1, "first_collision_step": 99}) + "\n", "first_collision"),
+        (_episode_line({"first_collision_step": 4}) + "\n", "first_collision_step cannot"),
+        (_episode_line({"robot_steps": 10**9}) + "\n", "robot_steps cannot"),
+        (_episode_line({"statuses": {"bogus": 7}}) + "\n", "statuses cannot"),
     ],
 )
 def test_a_file_that_is_not_a_checkpoint_is_refused_and_left_alone(tmp_path, text, match):
     path = tmp_path / "x.jsonl"
-    path.write_text(text)
+    path.write_bytes(text.encode())  # bytes: read_text would turn a CR into LF
     with pytest.raises(ValueError, match=match) as exc:
         run_stress(CASES, checkpoint=path, **KW)
     assert str(path) in str(exc.value)
-    assert path.read_text() == text
+    assert path.read_bytes() == text.encode()
 
 
 @pytest.mark.parametrize("path", ["", "  ", 3, True])
@@ -188,7 +213,9 @@ def test_the_cli_resumes_and_names_the_flag(tmp_path, capsys):
     link = tmp_path / "link.jsonl"
     link.symlink_to(ck)
     before = ck.read_text()
-    for same in (ck, link):  # --json would overwrite the checkpoint
+    hard = tmp_path / "hard.json"
+    os.link(ck, hard)
+    for same in (ck, link, hard):  # --json would overwrite the checkpoint
         with pytest.raises(ValueError, match="--json and --checkpoint must be different"):
             _cmd(f"{argv} --json {same}")
     assert ck.read_text() == before
@@ -241,6 +268,17 @@ def test_the_cli_stopped_prints_what_it_stored(tmp_path, capsys, monkeypatch):
     with pytest.raises(KeyboardInterrupt):  # without a checkpoint: nothing to show
         _cmd(argv.replace(f" --checkpoint {ck}", ""))
     assert capsys.readouterr() == ("", "")
+    with pytest.raises(KeyboardInterrupt):
+        _cmd(argv.replace(str(ck), str(tmp_path / "new.jsonl")))
+    out, err = capsys.readouterr()
+    assert out == "" and "stopped: no episode of this sweep is in" in err
+
+
+def test_identical_duplicate_lines_are_one_episode(tmp_path):
+    path = tmp_path / "x.jsonl"
+    path.write_text((_episode_line() + "\n") * 2)  # two sweeps wrote the same episode
+    rows, n = stored_rows(CASES[:1], checkpoint=path, **{**KW, "episodes": 1})
+    assert n == 1 and rows == run_stress(CASES[:1], **{**KW, "episodes": 1})
 
 
 @pytest.mark.parametrize(
