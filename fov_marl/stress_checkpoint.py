@@ -29,7 +29,7 @@ from fov_marl.validation import describe
 
 __all__ = ["CHECKPOINT_FORMAT", "code_id"]
 
-#: the ``format`` entry of a checkpoint line (:func:`run_stress`'s ``checkpoint``)
+#: the ``format`` entry of a checkpoint line (:func:`~fov_marl.stress.run_stress`'s ``checkpoint``)
 CHECKPOINT_FORMAT = "fov_marl.stress/episode-1"
 #: the entries of an episode record (:func:`~fov_marl.stress.run_stress_episode`)
 EPISODE_KEYS = frozenset(
