@@ -602,11 +602,15 @@ def stored_rows(
     steps: int,
     seed: int,
     checkpoint: str | os.PathLike,
+    name: str = "checkpoint",
 ) -> tuple[list[dict[str, Any]], int]:
     """The rows of a sweep from the episodes its checkpoint holds so far, without
     running any: a case's row aggregates its stored episodes (its ``episodes`` entry
     says how many); cases with none are left out. ``run_stress`` with the same
     arguments gives these rows once every episode is stored.
+
+    Args:
+        name: how errors name the checkpoint (the CLI's flag).
 
     Returns:
         ``(rows, number of stored episodes of the sweep)``.
@@ -618,7 +622,7 @@ def stored_rows(
     episodes = check_int("episodes", episodes, 1)
     steps = check_int("steps", steps, 1)
     seed = check_int("seed", seed, 0)
-    stored = read_checkpoint(checkpoint)[0]
+    stored = read_checkpoint(checkpoint, name)[0]
     rows, n = [], 0
     for case in cases:
         eps = [
@@ -1042,9 +1046,10 @@ def cmd_stress(args: argparse.Namespace) -> int:
         if same:
             raise ValueError(f"--json and --checkpoint must be different files, both are {a}")
     if args.checkpoint is not None:  # its lines checked before the sweep, naming the flag
-        read_checkpoint(args.checkpoint, "--checkpoint")
+        resumed = stored_rows(
+            cases, episodes, args.steps, args.seed, args.checkpoint, name="--checkpoint"
+        )[1]
         check_writable("--checkpoint", [args.checkpoint])
-        resumed = stored_rows(cases, episodes, args.steps, args.seed, args.checkpoint)[1]
         if resumed and not args.quiet:
             sys.stderr.write(
                 f"{resumed} of {len(cases) * episodes} episodes read from {args.checkpoint}\n"

@@ -42,33 +42,26 @@ EPISODE_KEYS = frozenset(
 
 
 def episode_id(case: Any, seed: int, steps: int) -> dict[str, Any]:
-    """One episode's identity as JSON values: its case's fields (``fov_deg`` a float),
-    seed and steps (non-finite floats kept: :func:`key_of` refuses them)."""
+    """One episode's identity: its case's fields (``fov_deg`` a float), seed and steps."""
     d = case.describe()
     d["fov_deg"] = float(d["fov_deg"])
-    return _plain({"case": d, "seed": int(seed), "steps": int(steps)})
+    return {"case": d, "seed": int(seed), "steps": int(steps)}
 
 
-def _plain(obj: Any) -> Any:
-    """``obj`` with NumPy values as Python ones, non-finite floats kept (unlike
-    :func:`~fov_marl.jsonio.jsonable`, which writes them as null: two cases differing
-    only in inf and NaN would share a key)."""
-    if isinstance(obj, dict):
-        return {k: _plain(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _plain(obj.tolist())
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
+def _numpy_value(obj: Any) -> Any:
+    """``json``'s ``default``: NumPy scalars and arrays as Python values. Non-finite
+    floats are kept, so ``allow_nan=False`` refuses them (``jsonio.jsonable`` writes
+    them as null: two cases differing only in inf and NaN would share a key)."""
+    if isinstance(obj, np.ndarray | np.generic):
+        return obj.tolist()
+    raise TypeError(f"{type(obj).__name__} is not a JSON value")
 
 
 def key_of(episode_id: Mapping[str, Any]) -> str:
     """The lookup key of :func:`episode_id`'s dict (or of one read back from a line)."""
     ident = {k: episode_id.get(k) for k in ("case", "seed", "steps")}
     try:
-        return json.dumps(ident, sort_keys=True, allow_nan=False)
+        return json.dumps(ident, sort_keys=True, allow_nan=False, default=_numpy_value)
     except (TypeError, ValueError):
         raise ValueError(
             "a checkpoint needs cases whose fields are JSON values (finite numbers, "
@@ -109,7 +102,7 @@ def append_episode(sink: Any, case: Any, seed: int, steps: int, rec: dict) -> No
         **episode_id(case, seed, steps),
         "record": jsonable(rec),
     }
-    sink.write(json.dumps(line, allow_nan=False) + "\n")
+    sink.write(json.dumps(line, allow_nan=False, default=_numpy_value) + "\n")
     sink.flush()
 
 
@@ -141,14 +134,15 @@ def record_problem(
         and rec["robot_steps"] > n_steps * n_agents
     ):
         bad.append("robot_steps")
-    fcs, collided = rec["first_collision_step"], rec["collisions"] != 0
-    if "collisions" in bad:
-        pass
-    elif fcs is None:
-        if collided:
+    fcs = rec["first_collision_step"]
+    if "collisions" not in bad:  # a first collision step exactly when there was one
+        collided = rec["collisions"] > 0
+        if fcs is None:
+            fine = not collided
+        else:
+            fine = collided and _nonneg_int(fcs) and 1 <= fcs <= n_steps
+        if not fine:
             bad.append("first_collision_step")
-    elif not (_nonneg_int(fcs) and 1 <= fcs <= n_steps and collided):
-        bad.append("first_collision_step")
     if rec["min_distance_m"] is not None and not _finite_nonneg(rec["min_distance_m"]):
         bad.append("min_distance_m")
     fields = ("intervened", "fallbacks", "filter_chatter_events", "action_change_sum")
@@ -181,10 +175,10 @@ def read_checkpoint(
     """The episodes of a checkpoint file (none when it does not exist).
 
     Every line must be an episode written by this package version and code
-    (:func:`code_id`), with a record :func:`~fov_marl.stress.run_stress_episode` can have returned. The
-    last line may lack its newline: when it is such an episode it counts; when it is the
-    beginning of one (a run stopped while writing it, after at least one whole line) it
-    is ignored. Anything else raises, so a file that is not a checkpoint (a wrong path)
+    (:func:`code_id`), with a record :func:`~fov_marl.stress.run_stress_episode` can have
+    returned. The last line may lack its newline: when it is such an episode it counts;
+    when it is the beginning of one (a run stopped while writing it, after at least one
+    whole line) it is ignored. Anything else raises, so a file that is not a checkpoint (a wrong path)
     is never truncated or appended to.
 
     Args:
