@@ -19,9 +19,11 @@ key                         meaning
 ``safety/applied_action``   (3,) float32, the action sent to the env
 ``safety/intervened``       bool, ‖u − u*‖ above the controller's tolerance
 ``safety/status_code``      int, QP outcome (:data:`fov_marl.infos.SAFETY_STATUSES`:
-                            ``"unconstrained"``, ``"solved"``, ``"relaxed"``,
-                            ``"safety_fallback"``, ``"degraded"``, ``"qp_failed"``,
-                            ``"invalid_input"``; see :class:`~fov_marl.control.ControlResult`)
+                            ``"reset"`` (0, at ``reset()``), ``"unconstrained"``,
+                            ``"solved"``, ``"relaxed"``, ``"safety_fallback"``,
+                            ``"degraded"``, ``"qp_failed"``, ``"invalid_input"``,
+                            ``"no_neighbours"`` (a one-robot team without wall rows);
+                            see :class:`~fov_marl.control.ControlResult`)
 ``safety/fallback``         bool, a fallback input was used (``"safety_fallback"``: the
                             collision rows could not all be met)
 ``safety/cause_bits``       int, why the action was changed: bit k for
