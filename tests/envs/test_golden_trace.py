@@ -15,7 +15,8 @@ instruction sets). :mod:`tests.envs.test_vector_env` covers the batched core aga
 the ParallelEnv on any platform.
 
 To add a CPU: check out the reference implementation (``650fe82``), run this module as
-a script there, and append its output to ``recordings``.
+a script on it (``git worktree add /tmp/ref 650fe82``, then ``PYTHONPATH=/tmp/ref python
+tests/envs/test_golden_trace.py``), and append its output to ``recordings``.
 """
 
 from __future__ import annotations
@@ -29,7 +30,14 @@ import numpy as np
 import pytest
 
 from fov_marl.envs import fov_coverage_v0, fov_crossing_v0
-from fov_marl.infos import metrics_of
+
+try:
+    from fov_marl.infos import metrics_of
+except ImportError:  # the reference implementation (650fe82) nests them: infos[a]["metrics"]
+
+    def metrics_of(info: dict) -> dict:
+        return info["metrics"]
+
 
 GOLDEN = Path(__file__).with_name("golden_env_traces.json")
 MODULES = {"coverage": fov_coverage_v0, "crossing": fov_crossing_v0}

@@ -130,10 +130,15 @@ def test_calibration_long_runs(n_agents, seed):
 
 
 def test_calibration_against_the_real_env_when_available():
-    """Same check on ``fov_coverage_v0`` (coverage model, default standoff)."""
-    envs = pytest.importorskip("fov_marl.envs.fov_coverage_v0")
+    """Same check on ``fov_coverage_v0`` (coverage model, default standoff): the truth
+    inside the 95% ellipse at least at the floor, with ellipses that still say something
+    (a detected neighbour's within 2 m, a long-unseen one's not arena-wide: a tracker
+    with huge ellipses would meet the floor alone). Measured at seed 0: 0.988 of 1,624
+    detected and 0.984 of 9,486 long-unseen neighbour-steps; median semi-major axes
+    0.89 m and 12.6 m."""
     import numpy as np
 
+    import fov_marl.envs.fov_coverage_v0 as envs
     from fov_marl.estimation import TrackerBank
     from fov_marl.geometry import ellipse_distance, world_to_body
 
@@ -144,6 +149,7 @@ def test_calibration_against_the_real_env_when_available():
     bank.reset(obs, initial_poses_world=env.poses)
     pol = RingMotion(env.config, np.random.default_rng(0), radius_m=7.0)
     hits = {"detected": [0, 0], "long": [0, 0]}
+    axes: dict[str, list[float]] = {"detected": [], "long": []}
     for _ in range(400):
         a = pol(env.poses)
         actions = {ag: a[i].astype(np.float32) for i, ag in enumerate(agents)}
@@ -164,7 +170,10 @@ def test_calibration_against_the_real_env_when_available():
             for k, sel in (("detected", e.detected[i]), ("long", long_)):
                 hits[k][0] += int(ins[sel].sum())
                 hits[k][1] += int(sel.sum())
+                axes[k].extend(e.ellipse_a[i][sel].tolist())
     print(f"\n[calibration] fov_coverage_v0 coverage-like motion, coverage model: {hits}")
-    for _k, (h, n) in hits.items():
-        if n > 200:
-            assert h / n >= FLOOR - 0.02
+    for k, (h, n) in hits.items():
+        assert n > 200, (k, n)  # enough neighbour-steps of both kinds to judge
+        assert h / n >= FLOOR - 0.02, (k, h / n)
+    assert np.median(axes["detected"]) <= 2.0, np.median(axes["detected"])
+    assert np.median(axes["long"]) <= 0.5 * env.config.arena_size_m, np.median(axes["long"])
