@@ -91,7 +91,7 @@ from fov_marl.envs.vector import (
     vector_seeds,
     warn_no_render,
 )
-from fov_marl.validation import check_int, describe
+from fov_marl.validation import ConfigError, check_int, describe
 
 __all__ = ["SubprocVectorEnv", "build_raw_vector_env", "make_vector_env"]
 
@@ -134,14 +134,16 @@ def make_vector_env(
     return SubprocVectorEnv(make, check_num_envs(num_envs), int(workers))
 
 
-#: worker exceptions the parent raises again as themselves (with the worker's message)
-_RERAISED = (ValueError, AttributeError)
+#: worker exceptions the parent raises again as themselves (with the worker's message);
+#: the first class the exception is an instance of wins, so ``ConfigError`` stays one
+_RERAISED = (ConfigError, ValueError, AttributeError)
 
 
 def _error(exc: BaseException) -> tuple[str, str, str, int]:
     """What the parent needs to raise it again: name, message, traceback, and the index
-    in ``_RERAISED`` of the class it is raised again as (``ConfigError`` is a
-    ``ValueError``; an unknown attribute stays an ``AttributeError``), or -1."""
+    in ``_RERAISED`` of the class it is raised again as (a ``ConfigError`` stays one, as
+    in one process; any other ``ValueError`` becomes a ``ValueError``; an unknown
+    attribute stays an ``AttributeError``), or -1."""
     kind = next((k for k, cls in enumerate(_RERAISED) if isinstance(exc, cls)), -1)
     return type(exc).__name__, str(exc), traceback.format_exc(), kind
 
@@ -589,6 +591,11 @@ class SubprocVectorEnv:
         warn_no_render()
 
     # --------------------------------------------------------------- close
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` ran (or the workers failed to start)."""
+        return self._closed
+
     def close(self) -> None:
         """Stop the workers (idempotent)."""
         if self._closed:

@@ -54,6 +54,13 @@ Actions: any real (integer or floating) array-like of shape ``(B, N, 3)`` with f
 entries, clipped to ``[-1, 1]`` and speed-limited as in the ParallelEnv; another shape,
 a non-numeric, boolean or complex dtype, NaN or inf raise ``ValueError`` naming
 ``actions``.
+
+Errors and closing. A :meth:`~FovVectorEnv.step` whose automatic reset fails (random
+starts that do not fit, :func:`~fov_marl.envs.world.sample_initial_poses`) raises after
+every copy has stepped, so the env refuses to step again until :meth:`~FovVectorEnv.reset`
+(``ValueError``; a failed ``reset`` likewise). :meth:`~FovVectorEnv.close` sets
+``closed``; ``reset`` and ``step`` then raise ``ValueError``, as on a closed
+``SubprocVectorEnv``.
 """
 
 from __future__ import annotations
@@ -68,6 +75,13 @@ from fov_marl.config import ScenarioConfig
 from fov_marl.envs.base import MAX_CYCLES, scenario_config
 from fov_marl.envs.core import CORES, BatchedCore
 from fov_marl.validation import check_seed, describe, holds_bool
+
+try:  # Gymnasium >= 1.1 names the autoreset modes with an enum
+    from gymnasium.vector import AutoresetMode
+
+    _SAME_STEP: Any = AutoresetMode.SAME_STEP
+except ImportError:  # pragma: no cover - Gymnasium 1.0
+    _SAME_STEP = "SameStep"
 
 __all__ = [
     "FovVectorEnv",
@@ -165,7 +179,9 @@ class FovVectorEnv:
         ValueError: bad ``num_envs`` or config (naming the field).
     """
 
-    metadata: dict[str, Any] = {"render_modes": [], "autoreset_mode": "SameStep"}
+    #: ``autoreset_mode`` is Gymnasium's ``AutoresetMode.SAME_STEP`` (its value
+    #: ``"SameStep"`` on Gymnasium 1.0, which has no enum)
+    metadata: dict[str, Any] = {"render_modes": [], "autoreset_mode": _SAME_STEP}
     #: The vector env does not render (use a ParallelEnv for frames).
     render_mode: str | None = None
 
@@ -219,6 +235,8 @@ class FovVectorEnv:
         self.action_space = gymnasium.spaces.Box(-1.0, 1.0, (B, N, 3), np.float32)
         self._all = np.arange(B)
         self._needs_reset = True
+        self._not_ready = "step() called before reset(); call reset() first"
+        self.closed = False
 
     @classmethod
     def from_config(
@@ -243,9 +261,12 @@ class FovVectorEnv:
                 entries) seeds copies one by one; None continues every copy's generator.
             options: a dict or None (unused by these scenarios).
         """
+        self._check_open()
         seeds = vector_seeds(seed, self.num_envs)
         if options is not None and not isinstance(options, Mapping):
             raise ValueError(f"options must be a dict or None, got {describe(options)}")
+        self._needs_reset = True  # until every copy has reset
+        self._not_ready = "the last reset() failed; call reset() again"
         obs, metrics = self._core.reset(self._all, seeds)
         self._needs_reset = False
         return obs, {"metrics": metrics}
@@ -259,10 +280,17 @@ class FovVectorEnv:
             ``(obs (B, N, D) float32, rewards (B, N) float32, terminations (B, N) bool,
             truncations (B, N) bool, infos)``.
         """
+        self._check_open()
         if self._needs_reset:
-            raise ValueError("step() called before reset(); call reset() first")
+            raise ValueError(self._not_ready)
         act = check_vector_actions(actions, self.num_envs, self.n_agents)
         core = self._core
+        # every copy steps before the finished ones reset: a reset that raises leaves the
+        # batch half-stepped, so nothing steps on until reset()
+        self._needs_reset = True
+        self._not_ready = (
+            "the last step() failed (a finished copy could not reset); call reset() first"
+        )
         obs, rew, term, metrics = core.step(act)
         trunc = (core.num_steps >= self.max_cycles) & ~term
         done = term | trunc
@@ -277,10 +305,15 @@ class FovVectorEnv:
             for k, v in new_metrics.items():
                 reset_metrics[k][idx] = v
             infos["reset_metrics"] = reset_metrics
+        self._needs_reset = False
         N = self.n_agents
         terminations = np.repeat(term[:, None], N, axis=1)
         truncations = np.repeat(trunc[:, None], N, axis=1)
         return obs, rew.astype(np.float32), terminations, truncations, infos
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise ValueError("the vector env is closed")
 
     # ------------------------------------------------------------- ground truth
     @property
@@ -342,7 +375,10 @@ class FovVectorEnv:
         warn_no_render()
 
     def close(self) -> None:
-        """Nothing to release (no rendering); kept for the vector-env protocol."""
+        """Mark the env closed (``closed`` True; nothing else to release): ``reset`` and
+        ``step`` then raise ``ValueError``, as on a closed ``SubprocVectorEnv`` and
+        Gymnasium's ``AsyncVectorEnv``. Closing twice is harmless."""
+        self.closed = True
 
     def __repr__(self) -> str:
         return (

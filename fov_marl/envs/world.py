@@ -31,6 +31,7 @@ from fov_marl.spaces import SLOT_DETECTED, SLOT_P_BODY, SLOT_SIZE, SLOT_YAW_CS
 __all__ = [
     "step_poses",
     "sample_initial_poses",
+    "PLACEMENT_ATTEMPTS",
     "crossing_layout",
     "Camera",
 ]
@@ -62,14 +63,44 @@ def sample_initial_poses(config: ScenarioConfig, rng: np.random.Generator) -> np
     Dart throwing: each robot's position is drawn uniformly in
     ``[r + 0.5, L − r − 0.5]²`` until it is at least ``init_min_separation_m`` from
     the robots already placed (at most 10 000 draws per robot); yaw uniform in
-    ``[-π, π)``.
+    ``[-π, π)``. When a robot finds no place (the ones before it took the room, as two
+    robots near the middle of a small arena can), the whole team is placed again,
+    continuing the generator, up to ``PLACEMENT_ATTEMPTS`` times. A first attempt that
+    succeeds draws exactly what it always drew, so the poses of every such reset are
+    unchanged; the restarts only replace an error. (Measured: N = 3 at 3 m in a 6 m
+    arena, which the config's packing bound allows, failed 375 of 2,000 seeds with one
+    attempt, each one a failed reset, or in a vector env a failed step; none of 5,000
+    with 20. A team that does not fit fails in 20 attempts: 0.14 s for 5 robots there,
+    1.5 s for 90 robots at 3 m in a 30 m arena.)
 
     Raises:
-        ValueError: the arena cannot hold ``n_agents`` robots at that separation.
+        ValueError: no attempt placed all ``n_agents`` robots at that separation.
     """
     n, L, r = config.n_agents, config.arena_size_m, config.robot_radius_m
     lo, hi = r + 0.5, L - r - 0.5
     sep2 = config.init_min_separation_m**2
+    for _ in range(PLACEMENT_ATTEMPTS):
+        pos = _dart_throw(n, lo, hi, sep2, rng)
+        if pos is not None:
+            yaw = rng.uniform(-np.pi, np.pi, size=n)
+            return np.column_stack([pos, yaw])
+    raise ValueError(
+        f"could not place {n} robots at init_min_separation_m="
+        f"{config.init_min_separation_m} in a {L} m arena ({PLACEMENT_ATTEMPTS} attempts of "
+        "random placement); lower one of them, or give initial_poses"
+    )
+
+
+#: whole-team placements :func:`sample_initial_poses` tries before it gives up
+PLACEMENT_ATTEMPTS = 20
+
+
+def _dart_throw(
+    n: int, lo: float, hi: float, sep2: float, rng: np.random.Generator
+) -> np.ndarray | None:
+    """One sequential placement of ``n`` positions ``(n, 2)`` in ``[lo, hi]²`` at squared
+    separation ``sep2`` (batches of 100 draws, at most 100 batches per robot), or None
+    when a robot found no place."""
     pos = np.empty((n, 2))
     for i in range(n):
         for _ in range(100):
@@ -83,12 +114,8 @@ def sample_initial_poses(config: ScenarioConfig, rng: np.random.Generator) -> np
                 pos[i] = cand[np.argmax(ok)]
                 break
         else:
-            raise ValueError(
-                f"could not place {n} robots at init_min_separation_m="
-                f"{config.init_min_separation_m} in a {L} m arena; lower one of them"
-            )
-    yaw = rng.uniform(-np.pi, np.pi, size=n)
-    return np.column_stack([pos, yaw])
+            return None
+    return pos
 
 
 def crossing_layout(

@@ -12,6 +12,7 @@ import pytest
 from fov_marl.config import make_config
 from fov_marl.envs import SubprocVectorEnv, build_raw_vector_env, fov_coverage_v0, fov_crossing_v0
 from fov_marl.envs.subproc import merge_vector_infos
+from fov_marl.validation import ConfigError
 from fov_marl.wrappers import build_filtered_vector_env
 
 N = 4
@@ -293,14 +294,18 @@ def test_bad_arguments_and_worker_failures_raise_clear_errors():
         SubprocVectorEnv(_raise_key_error, 2, 2)
     with pytest.raises(ValueError, match="copies"):
         SubprocVectorEnv(_wrong_size, 2, 2)
-    # a ConfigError (a ValueError) in a worker comes back as ValueError, with its message
+    # a ConfigError in a worker comes back as a ConfigError (as in one process), with its
+    # message; it was rebuilt as a plain ValueError, which `except ConfigError` missed
     bad_filter = functools.partial(
         build_filtered_vector_env,
         config=make_config(n_agents=N),
         tracker_params={"n_particles_total": 0},
     )
-    with pytest.raises(ValueError, match="n_particles_total"):
+    with pytest.raises(ConfigError, match="n_particles_total"):
         SubprocVectorEnv(bad_filter, 2, 2)
+    with pytest.raises(ValueError, match="n_particles_total") as plain:
+        bad_filter(2)
+    assert type(plain.value) is ConfigError
     with pytest.raises(ValueError, match="workers"):
         fov_coverage_v0.vector_env(num_envs=2, workers=0)
 
@@ -337,8 +342,10 @@ def test_bad_arguments_and_worker_failures_raise_clear_errors():
             sub.step(np.zeros((3, N, 3)))
         assert "__main__" not in str(died.value)  # that hint is for a worker never built
     finally:
+        assert not sub.closed
         sub.close()
     sub.close()  # idempotent
+    assert sub.closed
     with pytest.raises(ValueError, match="closed"):
         sub.reset(seed=0)
     assert all(not p.is_alive() for p in sub._procs)
