@@ -20,7 +20,12 @@ key                             type        meaning
                                             listed in each scenario module's docstring
 ``safety/nominal_action``       (3,) f32    the policy's action, clipped to [-1, 1]
 ``safety/applied_action``       (3,) f32    the action the filter sent to the env
-``safety/intervened``           bool        ‖u − u*‖ above the controller's tolerance
+``safety/intervened``           bool        ‖u − proj(u*)‖ above the controller's
+                                            tolerance; proj maps u* into the speed
+                                            polygon (``ControllerParams.n_polygon``), so
+                                            a full-speed u* between two of its vertices
+                                            is slowed by up to 1 − cos(π/16) = 1.9%
+                                            without counting as a change
 ``safety/fallback``             bool        a fallback input was used
 ``safety/status_code``          int         QP outcome, a code of :data:`SAFETY_STATUSES`
 ``safety/cause_bits``           int         why the action was changed: bit ``k`` for

@@ -71,6 +71,7 @@ from fov_marl.control.safety import (
     violated_kind_bits,
 )
 from fov_marl.estimation import TrackerParams, VectorTrackerBank
+from fov_marl.estimation.tracker import check_particle_budget
 from fov_marl.geometry import body_to_world, relative_pose, world_to_body, wrap_angle
 from fov_marl.infos import SAFETY_CAUSES
 from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, ObservationLayout, velocity_to_action
@@ -194,6 +195,16 @@ class PfCbfPipeline:
                 f"got {type(controller_params).__name__}"
             )
         self.tracker_params = tracker_params if tracker_params is not None else TrackerParams()
+        mode = self.tracker_params.init_mode
+        if mode not in ("auto", init):
+            # the particles would start one way and the controller's start state (blind
+            # travel budget, last-seen points) the other
+            raise ValueError(
+                f"tracker_params.init_mode = {mode!r} contradicts init = {init!r}; set the "
+                "initialisation with init= (init_mode 'auto' follows it)"
+            )
+        if estimates == "tracker":  # the bank's own check, here and not at reset()
+            check_particle_budget(self.tracker_params, self.n)
         self.controller_params = (
             controller_params if controller_params is not None else ControllerParams()
         )

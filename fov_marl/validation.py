@@ -394,20 +394,40 @@ def fov_parallel_base(name: str, env: Any, vector_hint: str = "") -> Any:
     """The fov_marl ParallelEnv under ``env`` (``env.unwrapped``), or a ``ValueError``.
 
     For wrappers that take one ParallelEnv (``name`` for the message): a vector env (it
-    has ``num_envs``) and anything without ``.config`` and ``.poses`` are refused, naming
+    has ``num_envs``), an AEC env (``env(...)``, whose ``unwrapped`` is the ParallelEnv
+    but whose ``reset`` and ``step`` are turn by turn), anything without ``.config`` and
+    ``.poses``, and a wrapper that changes the env's observations (the wrappers read the
+    env's own layout: ``BeliefObservationWrapper`` goes outside them) are refused, naming
     what was given; ``vector_hint`` ends the vector env's message (what to use instead).
     """
+    from pettingzoo import AECEnv
+
     base = getattr(env, "unwrapped", None)
     if hasattr(env, "num_envs") or hasattr(base, "num_envs"):
         raise ValueError(
             f"{name} wraps one fov_marl ParallelEnv (parallel_env(...)), got the vector env "
             f"{type(env).__name__}" + (f"; {vector_hint}" if vector_hint else "")
         )
+    if isinstance(env, AECEnv):
+        raise ValueError(
+            f"{name} wraps a ParallelEnv (fov_coverage_v0.parallel_env(...) or "
+            f"fov_crossing_v0.parallel_env(...)), got the AEC env {type(env).__name__}; wrap "
+            "the ParallelEnv and convert the wrapper (pettingzoo.utils.parallel_to_aec)"
+        )
     if base is None or not hasattr(base, "config") or not hasattr(base, "poses"):
         raise ValueError(
             f"{name} needs a fov_marl ParallelEnv (fov_coverage_v0.parallel_env(...) or "
             f"fov_crossing_v0.parallel_env(...), possibly wrapped), got {describe(env)}"
         )
+    if env is not base and base.possible_agents:
+        agent = base.possible_agents[0]
+        own, got = base.observation_space(agent).shape, env.observation_space(agent).shape
+        if got != own:
+            raise ValueError(
+                f"{name} reads the env's own observations, shape {own} per agent, but "
+                f"{type(env).__name__} gives {got}: apply wrappers that change the "
+                f"observations (BeliefObservationWrapper) outside {name}"
+            )
     return base
 
 

@@ -490,7 +490,8 @@ class ControllerParams:
         cascade_reg: ρ, weight of ‖u − u*‖² in the cascade QPs, in [1e-8, 1e-2].
         qp_eps: OSQP absolute and relative tolerance (osqp backend), in (0, 1e-2].
         qp_max_iter: OSQP iteration cap (osqp backend), in [10, 10^6].
-        intervention_tol: ‖u − u*‖ above which ``intervened`` is True, [0, 1].
+        intervention_tol: ‖u − proj(u*)‖ above which ``intervened`` is True (proj: onto
+            the speed polygon), [0, 1].
         kp_coverage: K_p of the coverage and crossing proportional laws (1/s), (0, 100].
         k_omega: gain of the facing law (1/s), (0, 100].
         face_distance_m: distance to the goal below which ω fades linearly to 0, (0, 100].

@@ -105,7 +105,14 @@ from fov_marl.geometry import chi2_2dof, confidence_ellipse, ellipse_distance, w
 from fov_marl.spaces import CUE_SIZE, SLOT_SIZE, ObservationLayout, action_to_velocity
 from fov_marl.validation import ConfigError, check_int, check_seed, describe, holds_bool
 
-__all__ = ["TrackerEstimate", "BankEstimate", "TrackerBank", "NeighborTracker", "VectorTrackerBank"]
+__all__ = [
+    "TrackerEstimate",
+    "BankEstimate",
+    "TrackerBank",
+    "NeighborTracker",
+    "VectorTrackerBank",
+    "check_particle_budget",
+]
 
 
 @dataclass(frozen=True)
@@ -958,6 +965,17 @@ _POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
 _POOLS_LOCK = threading.Lock()
 
 
+def check_particle_budget(params: TrackerParams, n_agents: int) -> None:
+    """``ValueError`` unless ``params.n_particles_total`` gives every one of the
+    ``n_agents − 1`` neighbours a particle (what a bank of that team needs)."""
+    m = int(n_agents) - 1
+    if params.n_particles_total < m:
+        raise ValueError(
+            f"n_particles_total must be >= the number of neighbours N - 1 = {m}, "
+            f"got {params.n_particles_total}"
+        )
+
+
 def _pool(n_threads: int) -> ThreadPoolExecutor:
     key = (os.getpid(), n_threads)
     with _POOLS_LOCK:
@@ -1074,11 +1092,7 @@ class TrackerBank:
                 f"got {len(rngs)} objects"
             )
         m = n - 1
-        if params.n_particles_total < m:
-            raise ValueError(
-                f"n_particles_total must be >= the number of neighbours N - 1 = {m}, "
-                f"got {params.n_particles_total}"
-            )
+        check_particle_budget(params, n)
         self.config = config
         self.params = params
         self.agent_indices = idx.astype(np.int64)

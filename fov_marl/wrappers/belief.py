@@ -296,6 +296,8 @@ class BeliefObservationWrapper(BaseParallelWrapper):
         return self.featurizer.augment(obs), infos
 
     def step(self, actions: dict[str, Any]):
+        if self.featurizer.bank is None:  # before the env moves, as the safety filter does
+            raise ValueError("BeliefObservationWrapper.step() called before reset()")
         obs, rewards, terms, truncs, infos = self.env.step(actions)
         if obs:
             self.featurizer.step(actions, obs)
