@@ -73,7 +73,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             **on,
             **off,
         )
-    except ValueError as exc:
+    except FileExistsError:
+        sys.exit(f"benchmarl_mappo.py: error: --out {args.out} is a file, not a folder")
+    except (ValueError, OSError) as exc:
         sys.exit(f"benchmarl_mappo.py: error: {exc}")
     t0 = time.perf_counter()
     exp.run()

@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from typing import Any
@@ -38,7 +39,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument(
         "--train-batch-size", type=int, default=2000, help="env steps per iteration (2000)"
     )
-    p.add_argument("--minibatch-size", type=int, default=250, help="SGD minibatch (250)")
+    p.add_argument(
+        "--minibatch-size", type=int, default=250, help="SGD minibatch (250; at most the batch)"
+    )
     p.add_argument("--num-epochs", type=int, default=5, help="SGD epochs per iteration (5)")
     p.add_argument("--num-cpus", type=int, default=2, help="CPUs of the local Ray (2)")
     p.add_argument("--seed", type=int, default=0, help="seed (0)")
@@ -54,8 +57,13 @@ def _mean_return(result: dict[str, Any]) -> float:
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     args = parse_args(argv)
-    if args.iterations < 1:
-        sys.exit("rllib_ppo.py: error: --iterations must be an integer in [1, inf)")
+    for name in ("iterations", "num_cpus"):
+        if getattr(args, name) < 1:
+            flag = "--" + name.replace("_", "-")
+            sys.exit(f"rllib_ppo.py: error: {flag} must be an integer in [1, inf)")
+    if args.out is not None and os.path.exists(args.out) and not os.path.isdir(args.out):
+        # checked before training: the checkpoint is written only at the end
+        sys.exit(f"rllib_ppo.py: error: --out {args.out} is a file, not a folder")
     from fov_marl.integrations.rllib import ppo_config
 
     env_config = {

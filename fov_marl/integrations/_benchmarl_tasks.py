@@ -71,9 +71,10 @@ class FovMarlClass(PettingZooClass):
         self, num_envs: int, continuous_actions: bool, seed: int | None, device: Any
     ) -> Callable[[], EnvBase]:
         """The env factory of BenchMARL's training and evaluation envs. Its k-th call
-        (k = 0, 1, ...) builds an env whose first reset uses ``seed + k``: the copies of a
-        ``SerialEnv(n, make)`` (how BenchMARL batches the training env) start from
-        different configurations, as the copies of a fov_marl vector env do, instead of
+        (k = 0, 1, ...) builds an env whose first reset (made by TorchRL's wrapper while it
+        builds the env; see :func:`fov_marl.integrations.torchrl.wrap`) uses ``seed + k``:
+        the copies of a ``SerialEnv(n, make)`` (how BenchMARL batches the training env)
+        start from different configurations, as the copies of a fov_marl vector env do, instead of
         all from ``seed``. In the worker processes of a ``ParallelEnv``
         (``parallel_collection=True``) each worker counts its own calls, so the seed also
         mixes in the worker's process identity (:func:`copy_seed`): distinct copies, the

@@ -43,6 +43,10 @@ def wrap(parallel_env: Any, *, seed: int | None = None, device: Any = "cpu") -> 
     Args:
         parallel_env: a fov env, possibly wrapped (safety filter, belief features).
         seed: seed of the first reset (later resets continue the env's generator).
+            TorchRL's wrapper makes that reset in its constructor (to read the info
+            specs), so a first ``env.rollout(...)``, which resets without a seed, starts
+            with the *next* episode; ``env.reset(seed=seed)`` gives exactly
+            ``parallel_env.reset(seed=seed)``. Reproducible either way.
         device: torch device of the tensors.
 
     Raises:
@@ -79,7 +83,8 @@ def make_env(
         scenario: ``"coverage"`` or ``"crossing"``.
         safety_filter: put :class:`~fov_marl.wrappers.SafetyFilterWrapper` inside.
         belief: append the belief features (:class:`~fov_marl.wrappers.BeliefObservationWrapper`).
-        seed: seed of the first reset.
+        seed: seed of the first reset, made while building the env (see :func:`wrap`:
+            a first ``rollout`` starts with the next episode).
         device: torch device.
         filter_kwargs, belief_kwargs: keyword arguments of the wrappers.
         **config: scenario config fields (``n_agents``, ``fov_deg``, ``max_cycles``, ...).

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+README = EXAMPLES.parent / "README.md"  # an existing file
 
 
 def _load(name: str):
@@ -43,10 +44,16 @@ def test_benchmarl_example(tmp_path):
         ("torchrl_rollout", ["--n-agents=0"], "n_agents"),
         ("benchmarl_mappo", ["--algorithm=dqn"], "algorithm must be one of"),
         ("benchmarl_mappo", ["--frames=0"], "--frames must be an integer in [1, inf)"),
+        # an existing file as --out: a FileExistsError traceback (RLlib's only after the
+        # whole training, when the checkpoint was written); a negative CPU count: Ray's
+        ("benchmarl_mappo", [f"--out={README}"], "is a file, not a folder"),
+        ("rllib_ppo", [f"--out={README}"], "is a file, not a folder"),
+        ("rllib_ppo", ["--num-cpus=-1"], "--num-cpus must be an integer in [1, inf)"),
     ],
 )
 def test_examples_reject_bad_arguments_in_one_line(name, argv, message):
-    if find_spec("torchrl" if name.startswith("torchrl") else "benchmarl") is None:
+    framework = {"torchrl": "torchrl", "benchmarl": "benchmarl", "rllib": "ray"}
+    if find_spec(framework[name.split("_")[0]]) is None:
         pytest.skip("framework not installed")
     with pytest.raises(SystemExit) as exc:
         _load(name).main(argv)
