@@ -338,9 +338,9 @@ def run_evaluate(args: argparse.Namespace) -> dict[str, Any]:
     srows = []
     for f in columns[2:]:
         s = summary.get(f)
-        if s and s["mean"] is not None:
+        if s and (s["mean"] is not None or s["n"] == 0 and s["missing"]):
             lo, hi = s.get("ci95") or (None, None)  # None for a single episode
-            srows.append([f, s["mean"], s["std"], lo, hi, s["n"]])
+            srows.append([f, s["mean"], s["std"], lo, hi, s["n"]])  # n 0: none got there
     print()
     print(format_table(srows, ("metric", "mean", "std", "ci95_lo", "ci95_hi", "n")))
     causes = summary.get("intervention_causes")

@@ -1,7 +1,7 @@
 """Seeded episode runs and summaries shared by the CLI, the report and the tests.
 
-An :class:`EpisodeRecord` holds what ``results.json`` stores per episode (schema in
-design.md); :func:`summarize` adds mean, std and a 95% confidence interval clipped to
+An :class:`EpisodeRecord` holds what ``results.json`` stores per episode (the file's
+layout: ``docs/cli.md``, "results.json"); :func:`summarize` adds mean, std and a 95% confidence interval clipped to
 each field's feasible range (:data:`FEASIBLE`); :func:`bootstrap_ci` and
 :func:`paired_difference` give the percentile-bootstrap intervals and the paired
 sign-flip test the reproduction uses.
@@ -60,6 +60,7 @@ __all__ = [
     "summarize",
     "SUMMARY_FIELDS",
     "FEASIBLE",
+    "REACHED_FIELDS",
     "ETA_NORM_THRESHOLD",
     "bootstrap_ci",
     "paired_difference",
@@ -722,22 +723,33 @@ def time_to_settle(
     return k * dt_s
 
 
+#: Fields whose None means "never got there" (not "not measured"), with the episodes they
+#: apply to: when no episode got there, :func:`summarize` still reports the field with
+#: ``n`` 0 and ``missing`` the episodes it applies to.
+REACHED_FIELDS: dict[str, Callable[[EpisodeRecord], bool]] = {
+    "time_to_eta_99": lambda r: r.scenario == "coverage",
+    "time_to_eta_norm_s": lambda r: r.scenario == "coverage" and r.eta_norm_threshold is not None,
+    "time_to_arrival_s": lambda r: r.scenario == "crossing",
+    "time_to_settle_s": lambda r: r.steps > 0,
+}
+
+
 def _stats(
     values: Sequence[float], feasible: tuple[float, float] = (-_INF, _INF)
 ) -> dict[str, Any]:
     """n, missing, mean, std (ddof 1), 95% t-interval clipped to ``feasible``, min, max.
 
-    Over the finite values: None, NaN and ±inf count in ``missing``. ``ci95`` is None
-    for fewer than two values (no interval can be estimated)."""
+    Over the finite values: None, NaN and ±inf count in ``missing``. ``std`` and ``ci95``
+    are None for fewer than two values (no spread can be estimated from one)."""
     v = np.asarray([x for x in values if x is not None], dtype=np.float64)
     v = v[np.isfinite(v)]
     out: dict[str, Any] = {"n": int(v.size), "missing": len(values) - int(v.size)}
     if v.size == 0:
         return {**out, "mean": None, "std": None, "ci95": None, "min": None, "max": None}
     mean = float(v.mean())
-    std = float(v.std(ddof=1)) if v.size > 1 else 0.0
+    std = float(v.std(ddof=1)) if v.size > 1 else None
     ci = None
-    if v.size > 1:
+    if std is not None:
         half = _t95(v.size - 1) * std / math.sqrt(v.size)
         lo, hi = feasible
         ci = [float(min(max(mean - half, lo), hi)), float(min(max(mean + half, lo), hi))]
@@ -764,8 +776,11 @@ def summarize(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     The interval is clipped to the field's feasible range (:data:`FEASIBLE`; robots
     arrived also to ``[0, n_agents]``, ``min_distance`` also to the records' largest
     ``max_distance_m`` where every record has one) and is None with fewer than two values.
-    ``time_to_eta_99``, ``time_to_eta_norm_s`` and ``time_to_arrival_s`` ignore episodes
-    that never got there and report how many in ``missing``. Likewise every statistic
+    ``time_to_eta_99``, ``time_to_eta_norm_s``, ``time_to_arrival_s`` and
+    ``time_to_settle_s`` ignore episodes that never got there and report how many in
+    ``missing``, also when none got there (``n`` 0, statistics None), for the episodes
+    the field applies to (:data:`REACHED_FIELDS`); a field that applies to no episode
+    (a crossing time in coverage) is left out. Likewise every statistic
     is over the finite values only: ``min_distance`` of a one-robot team is inf (no
     pair), so such episodes count in ``missing``, and with no finite value at all the
     entry's ``mean``, ``std``, ``ci95``, ``min`` and ``max`` are None (never NaN or inf).
@@ -777,7 +792,10 @@ def summarize(records: Sequence[EpisodeRecord]) -> dict[str, Any]:
     for f in SUMMARY_FIELDS:
         vals = [getattr(r, f) for r in records]
         if all(v is None for v in vals):
-            continue
+            applies = REACHED_FIELDS.get(f)
+            if applies is None or not any(applies(r) for r in records):
+                continue
+            vals = [v for v, r in zip(vals, records, strict=True) if applies(r)]
         lo, hi = FEASIBLE.get(f, (-_INF, _INF))
         if f in ("arrived", "arrived_ever"):
             hi = min(hi, float(n_max))
@@ -814,7 +832,9 @@ def bootstrap_ci(
         seed: seeds the resampling (reproducible reports).
 
     Returns:
-        ``[lo, hi]``, or None for fewer than two observations.
+        ``[lo, hi]``, or None for fewer than two observations, or when the statistic is
+        undefined (NaN) in more than 1% of the resamples (e.g. a relative change over a
+        resample whose baseline mean is 0); below that, such resamples are left out.
     """
     v = np.asarray(values, dtype=np.float64)
     if v.shape[0] < 2:
@@ -822,6 +842,9 @@ def bootstrap_ci(
     rng = np.random.default_rng(seed)
     idx = rng.integers(0, v.shape[0], size=(n_boot, v.shape[0]))
     boot = (stat or (lambda x: x.mean(axis=1)))(v[idx])
+    boot = boot[~np.isnan(boot)]
+    if boot.size < 0.99 * n_boot:
+        return None
     a = (1.0 - level) / 2.0
     lo, hi = np.quantile(boot, [a, 1.0 - a])
     return [
@@ -843,7 +866,8 @@ def paired_difference(
     Pairs where either value is None (e.g. a threshold never reached) are dropped and
     counted in ``dropped``. Reports the mean difference ``a − b`` with a bootstrap CI
     clipped to ``feasible_diff``, the relative change ``mean(a) / mean(b) − 1`` in %
-    with its bootstrap CI (resampling seeds, clipped to ``[−100, ∞)``), the per-pair
+    with its bootstrap CI (resampling seeds, clipped to ``[−100, ∞)``; None when over 1%
+    of the resamples have a baseline mean of 0, see :func:`bootstrap_ci`), the per-pair
     differences, and the two-sided p-value of the exact (n ≤ 16) or Monte-Carlo
     (20 000 draws) paired sign-flip permutation test of the mean difference.
     ``significant`` is True when both say so at the 5% level: p < 0.05 and the

@@ -853,7 +853,8 @@ def _ms(s: dict[str, Any] | None, nd: int = 2) -> str:
     if not s or s.get("mean") is None:
         return "never" if s and s.get("missing") else "–"
     miss = f" ({s['missing']} never)" if s.get("missing") else ""
-    return f"{s['mean']:.{nd}f} ± {s['std']:.{nd}f}{miss}"
+    spread = "" if s.get("std") is None else f" ± {s['std']:.{nd}f}"  # None for one value
+    return f"{s['mean']:.{nd}f}{spread}{miss}"
 
 
 def _p(p: float | None) -> str:

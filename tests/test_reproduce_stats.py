@@ -102,3 +102,37 @@ def test_paired_difference_drops_incomplete_pairs_and_uses_the_exact_test():
     assert empty["n"] == 0 and empty["significant"] is None
     clipped = paired_difference([0.0, 0.0, 0.0], [1.0, 1.0, 0.9], feasible_diff=(-0.5, 0.5))
     assert clipped["ci95"][0] == -0.5
+
+
+def test_relative_change_ci_leaves_out_resamples_with_a_zero_baseline():
+    """A single 0 in the baseline made some resamples' relative change NaN, and the
+    percentile of a set holding NaN is NaN: the interval read [nan, nan] (null in JSON,
+    like "fewer than two pairs")."""
+    many_zero = paired_difference([2, 1, 0, 3, 1, 2], [0, 0, 3, 0, 1, 2])
+    assert many_zero["rel_pct"] == pytest.approx(50.0)
+    assert many_zero["rel_ci95"] is None  # over 1% of the resamples undefined
+    few_zero = paired_difference([12, 10.4, 9.8, 11], [0.0, 9.0, 10.2, 10.6])
+    lo, hi = few_zero["rel_ci95"]
+    assert np.isfinite(lo) and np.isfinite(hi) and -100.0 <= lo < hi
+    assert bootstrap_ci(np.array([np.nan, 1.0, 2.0, 3.0])) is None
+
+
+def test_a_time_no_episode_reached_is_reported_with_its_count():
+    recs = [_rec(k, time_to_eta_99=None, time_to_settle_s=None) for k in range(3)]
+    s = summarize(recs)
+    for f in ("time_to_eta_99", "time_to_settle_s"):
+        assert s[f]["n"] == 0 and s[f]["missing"] == 3 and s[f]["mean"] is None, s[f]
+    # a field that does not apply (a crossing time in coverage) stays out
+    assert "time_to_arrival_s" not in s and "arrived" not in s
+    # a coverage threshold with no optimum known does not apply either
+    assert "time_to_eta_norm_s" not in s
+    s = summarize([_rec(k, eta_norm_threshold=0.95) for k in range(2)])
+    assert s["time_to_eta_norm_s"] == {
+        "n": 0, "missing": 2, "mean": None, "std": None, "ci95": None, "min": None, "max": None,
+    }  # fmt: skip
+
+
+def test_one_value_has_no_spread():
+    s = summarize([_rec(0, final_eta=0.9)])
+    assert s["final_eta"]["mean"] == 0.9 and s["final_eta"]["std"] is None
+    assert s["final_eta"]["ci95"] is None
