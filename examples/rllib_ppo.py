@@ -61,9 +61,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         if getattr(args, name) < 1:
             flag = "--" + name.replace("_", "-")
             sys.exit(f"rllib_ppo.py: error: {flag} must be an integer in [1, inf)")
-    if args.out is not None and os.path.exists(args.out) and not os.path.isdir(args.out):
-        # checked before training: the checkpoint is written only at the end
-        sys.exit(f"rllib_ppo.py: error: --out {args.out} is a file, not a folder")
+    if args.out is not None:  # checked before training: the checkpoint comes at the end
+        path = os.path.abspath(args.out)
+        while not os.path.exists(path):  # the nearest part of the path that exists
+            path = os.path.dirname(path)
+        if not os.path.isdir(path):
+            sys.exit(f"rllib_ppo.py: error: --out {args.out}: {path} is a file, not a folder")
     from fov_marl.integrations.rllib import ppo_config
 
     env_config = {

@@ -834,7 +834,9 @@ def bootstrap_ci(
     Returns:
         ``[lo, hi]``, or None for fewer than two observations, or when the statistic is
         undefined (NaN) in more than 1% of the resamples (e.g. a relative change over a
-        resample whose baseline mean is 0); below that, such resamples are left out.
+        resample whose baseline mean is 0); below that, such resamples are left out
+        (for that relative change they are +∞, so the upper end moves in by at most one
+        percentile).
     """
     v = np.asarray(values, dtype=np.float64)
     if v.shape[0] < 2:

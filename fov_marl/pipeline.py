@@ -201,7 +201,8 @@ class PfCbfPipeline:
             # travel budget, last-seen points) the other
             raise ValueError(
                 f"tracker_params.init_mode = {mode!r} contradicts init = {init!r}; set the "
-                "initialisation with init= (init_mode 'auto' follows it)"
+                "initialisation with init= (fov-marl: --filter-init; init_mode 'auto' "
+                "follows it)"
             )
         if estimates == "tracker":  # the bank's own check, here and not at reset()
             check_particle_budget(self.tracker_params, self.n)

@@ -442,7 +442,7 @@ def _coverage_analysis(
             "n": len(v),
             "missing": len(seeds) - len(v),
             "mean": float(np.mean(v)) if v else None,
-            "std": float(np.std(v, ddof=1)) if len(v) > 1 else (0.0 if v else None),
+            "std": float(np.std(v, ddof=1)) if len(v) > 1 else None,  # as summarize
         }
     comps: dict[str, dict[str, Any]] = {}
     for a, b in COMPARISONS:

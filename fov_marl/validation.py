@@ -419,14 +419,13 @@ def fov_parallel_base(name: str, env: Any, vector_hint: str = "") -> Any:
             f"{name} needs a fov_marl ParallelEnv (fov_coverage_v0.parallel_env(...) or "
             f"fov_crossing_v0.parallel_env(...), possibly wrapped), got {describe(env)}"
         )
-    if env is not base and base.possible_agents:
-        agent = base.possible_agents[0]
+    for agent in base.possible_agents if env is not base else ():
         own, got = base.observation_space(agent).shape, env.observation_space(agent).shape
         if got != own:
             raise ValueError(
                 f"{name} reads the env's own observations, shape {own} per agent, but "
-                f"{type(env).__name__} gives {got}: apply wrappers that change the "
-                f"observations (BeliefObservationWrapper) outside {name}"
+                f"{type(env).__name__} gives {got} for {agent}: apply wrappers that change "
+                f"the observations (BeliefObservationWrapper) outside {name}"
             )
     return base
 

@@ -54,9 +54,10 @@ shards (CPU time, not wall time), where the shards have it. :meth:`get_attr`,
 (``shard_starts`` says which copies each shard holds).
 
 Errors. Actions are checked here (shape, dtype, finite) with the messages of the
-vector env. A ``ValueError`` or ``AttributeError`` raised in a worker is raised again
-here with its message;
-any other exception becomes a ``RuntimeError`` carrying the worker's traceback. An
+vector env. A ``ValueError`` (a ``ConfigError`` stays one) or ``AttributeError`` raised
+in a worker is raised again here with its message; any other exception becomes a
+``RuntimeError`` carrying the worker's traceback. A ``step`` or ``reset`` that fails in
+a worker leaves the other shards moved, so the env refuses to step until ``reset()``. An
 argument that cannot be pickled is a ``ValueError`` before any worker sees the command.
 A worker that dies makes the next call raise ``RuntimeError``. Workers ignore SIGINT:
 Ctrl-C reaches the parent only. A call it interrupts leaves the pipes in order (every
@@ -133,6 +134,8 @@ def make_vector_env(
     make = partial(build_raw_vector_env, config=probe.config, eta_method=eta_method)
     return SubprocVectorEnv(make, check_num_envs(num_envs), int(workers))
 
+
+_NOT_RESET = "step() called before reset(); call reset() first"
 
 #: worker exceptions the parent raises again as themselves (with the worker's message);
 #: the first class the exception is an instance of wins, so ``ConfigError`` stays one
@@ -381,6 +384,7 @@ class SubprocVectorEnv:
         self.action_space = gymnasium.spaces.Box(-1.0, 1.0, (B, self.n_agents, 3), np.float32)
         self.last_cpu_s: float | None = None
         self._needs_reset = True
+        self._not_ready = _NOT_RESET
 
     # ------------------------------------------------------------ plumbing
     def _check_open(self) -> None:
@@ -431,17 +435,26 @@ class SubprocVectorEnv:
         self._drain()
         self._seq += 1
         seq = self._seq
-        for w, blob in enumerate(blobs):
-            try:
-                with _signals_deferred():
-                    self._conns[w].send((seq, bytes(blob)))
-                    self._sent[w] = seq
-            except (BrokenPipeError, OSError):
-                raise RuntimeError(
-                    f"worker {w} of the SubprocVectorEnv has exited "
-                    f"(exit code {self._procs[w].exitcode})"
-                ) from None
-        return self._recv_all(seq)
+        try:
+            for w, blob in enumerate(blobs):
+                try:
+                    with _signals_deferred():
+                        self._conns[w].send((seq, bytes(blob)))
+                        self._sent[w] = seq
+                except (BrokenPipeError, OSError):
+                    raise RuntimeError(
+                        f"worker {w} of the SubprocVectorEnv has exited "
+                        f"(exit code {self._procs[w].exitcode})"
+                    ) from None
+            return self._recv_all(seq)
+        except Exception:
+            if cmd in ("step", "reset"):
+                # a shard that failed (a finished copy that could not reset) left the
+                # others moved: nothing steps on until reset(), as in FovVectorEnv. A
+                # Ctrl-C (KeyboardInterrupt) is not this: the protocol keeps them in step.
+                self._needs_reset = True
+                self._not_ready = f"the last {cmd}() failed in a worker; call reset()"
+            raise
 
     def _recv_all(self, seq: int) -> list[Any]:
         """Every shard's answer to command ``seq``, in order (older answers are
@@ -505,7 +518,7 @@ class SubprocVectorEnv:
         """One step of every copy in parallel (same-step autoreset; module docstring)."""
         self._check_open()
         if self._needs_reset:
-            raise ValueError("step() called before reset(); call reset() first")
+            raise ValueError(self._not_ready)
         act = check_vector_actions(actions, self.num_envs, self.n_agents)
         st = self._starts
         parts = self._broadcast("step", [act[st[w] : st[w + 1]] for w in range(self.workers)])

@@ -349,3 +349,44 @@ def test_bad_arguments_and_worker_failures_raise_clear_errors():
     with pytest.raises(ValueError, match="closed"):
         sub.reset(seed=0)
     assert all(not p.is_alive() for p in sub._procs)
+
+
+def _no_room_after_first_reset(n: int):
+    """A shard of n copies whose random starts fail after the first reset (the 2-copy
+    shard only): a finished copy there cannot reset."""
+    import fov_marl.envs.core as core
+
+    env = build_raw_vector_env(n, config=make_config(n_agents=2, max_cycles=2))
+    if n == 2:
+        place, calls = core.sample_initial_poses, [0]
+
+        def flaky(config, rng):
+            calls[0] += 1
+            if calls[0] > 2:
+                raise ValueError("no room")
+            return place(config, rng)
+
+        core.sample_initial_poses = flaky
+    return env
+
+
+def test_a_shard_that_fails_stops_every_shard_until_reset():
+    """Red team: after one worker's automatic reset failed, each retried step raised
+    there while the healthy worker stepped (and reset) again: the batch drifted apart."""
+    from fov_marl.validation import ConfigError
+
+    with SubprocVectorEnv(_no_room_after_first_reset, 3, 2) as sub:
+        sub.reset(seed=0)
+        a = np.zeros((3, 2, 3))
+        sub.step(a)
+        with pytest.raises(ConfigError, match="no room"):
+            sub.step(a)  # every copy ends here; the 2-copy shard cannot reset
+        steps = sub.num_steps
+        for _ in range(2):
+            with pytest.raises(ValueError, match=r"last step\(\) failed in a worker"):
+                sub.step(a)
+            np.testing.assert_array_equal(sub.num_steps, steps)  # nobody stepped on
+        with pytest.raises(ConfigError, match="no room"):
+            sub.reset(seed=0)
+        with pytest.raises(ValueError, match=r"last reset\(\) failed"):
+            sub.step(a)

@@ -48,6 +48,8 @@ def test_benchmarl_example(tmp_path):
         # whole training, when the checkpoint was written); a negative CPU count: Ray's
         ("benchmarl_mappo", [f"--out={README}"], "is a file, not a folder"),
         ("rllib_ppo", [f"--out={README}"], "is a file, not a folder"),
+        ("rllib_ppo", [f"--out={README / 'run'}"], "is a file, not a folder"),
+        ("benchmarl_mappo", [f"--out={README / 'run'}"], "README.md/run"),
         ("rllib_ppo", ["--num-cpus=-1"], "--num-cpus must be an integer in [1, inf)"),
     ],
 )

@@ -76,3 +76,19 @@ def test_the_speed_polygon_shrink_is_not_an_intervention():
     info = infos["robot_0"]
     assert info["safety/applied_action"][0] == pytest.approx(math.cos(math.pi / 16), abs=1e-6)
     assert not info["safety/intervened"] and info["safety/cause_bits"] == 0
+
+
+def test_a_wrapper_that_changes_one_agents_observations_is_refused():
+    from pettingzoo.utils import BaseParallelWrapper
+
+    class OneLonger(BaseParallelWrapper):
+        def observation_space(self, agent):
+            space = self.env.observation_space(agent)
+            if agent != "robot_1":
+                return space
+            import gymnasium
+
+            return gymnasium.spaces.Box(-1.0, 1.0, (space.shape[0] + 1,), np.float32)
+
+    with pytest.raises(ValueError, match=r"gives \(18,\) for robot_1"):
+        SafetyFilterWrapper(OneLonger(_env()))
