@@ -14,7 +14,17 @@ import hashlib
 from collections.abc import Iterable
 from pathlib import Path
 
-__all__ = ["source_fingerprint"]
+__all__ = ["source_fingerprint", "NOT_EPISODE"]
+
+#: Files that cannot change any episode (reports, plots, the CLI, benchmarks, the
+#: caches' own modules, training), left out by every caller; a caller adds its own
+#: (``reproduce`` also leaves out ``stress.py``).
+NOT_EPISODE: frozenset[str] = frozenset(
+    (
+        "report.py plots.py cli.py demo.py video.py bench.py backends.py tables.py "
+        "stress_checkpoint.py fingerprint.py training/"
+    ).split()
+)
 
 _MEMO: dict[frozenset[str], str] = {}
 

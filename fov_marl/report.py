@@ -49,7 +49,7 @@ from fov_marl.evaluation import (
     run_episode,
     summarize,
 )
-from fov_marl.fingerprint import source_fingerprint
+from fov_marl.fingerprint import NOT_EPISODE, source_fingerprint
 from fov_marl.jsonio import write_json
 
 __all__ = ["reproduce", "PAPER", "plan", "Job", "OUTPUT_FILES"]
@@ -85,11 +85,9 @@ CONDITIONS = (
 COMPARISONS = (("pfcbf 120°", "pfcbf 360°"), ("pfcbf 120°", "ideal"), ("pfcbf 360°", "ideal"))
 #: Fraction of ideal's final η (same seed) for the issue's paired reading of the threshold.
 IDEAL_FRACTION = 0.99
-#: Source files that cannot change an episode (left out of the cache fingerprint).
-_NOT_EPISODE = {
-    "report.py", "plots.py", "cli.py", "demo.py", "video.py", "bench.py", "stress.py",
-    "backends.py", "tables.py", "stress_checkpoint.py", "fingerprint.py",
-}  # fmt: skip
+#: Source files that cannot change a reproduce episode (left out of the cache
+#: fingerprint): those that cannot change any, and the stress sweep.
+_NOT_EPISODE = NOT_EPISODE | {"stress.py"}
 
 
 # ------------------------------------------------------------------------------ jobs
@@ -198,7 +196,7 @@ def plan(quick: bool = False, seeds: int | None = None) -> dict[str, Any]:
 
 def _code_fingerprint() -> str:
     """sha256 of the package sources that decide an episode (not this report's own)."""
-    return source_fingerprint({*_NOT_EPISODE, "training/"})
+    return source_fingerprint(_NOT_EPISODE)
 
 
 def _git_state() -> dict[str, Any]:

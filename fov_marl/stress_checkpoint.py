@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from fov_marl.fingerprint import source_fingerprint
+from fov_marl.fingerprint import NOT_EPISODE, source_fingerprint
 from fov_marl.infos import SAFETY_CAUSES, SAFETY_STATUSES
 from fov_marl.jsonio import jsonable
 from fov_marl.validation import describe
@@ -74,18 +74,9 @@ def episode_key(case: Any, seed: int, steps: int) -> str:
     return key_of(episode_id(case, seed, steps))
 
 
-#: files that cannot change a stress episode (left out of :func:`code_id`)
-NOT_EPISODE: frozenset[str] = frozenset(
-    (
-        "report.py plots.py cli.py demo.py video.py bench.py backends.py tables.py "
-        "stress_checkpoint.py training/"
-    ).split()
-)
-
-
 def code_id() -> str:
     """12 hex digits of :func:`~fov_marl.fingerprint.source_fingerprint` over the
-    package's source less :data:`NOT_EPISODE`: the code that measured a checkpoint's
+    package's source less :data:`~fov_marl.fingerprint.NOT_EPISODE`: the code that measured a checkpoint's
     episodes (the package version alone stays the same across commits)."""
     return source_fingerprint(NOT_EPISODE)[:12]
 

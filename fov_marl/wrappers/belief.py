@@ -83,6 +83,7 @@ from pettingzoo.utils.wrappers import BaseParallelWrapper
 from fov_marl.envs.base import FORWARDED_MAX_CYCLES
 from fov_marl.estimation import TrackerBank
 from fov_marl.estimation.params import TrackerParams
+from fov_marl.estimation.tracker import check_particle_budget
 from fov_marl.geometry import chi2_2dof
 from fov_marl.validation import (
     ConfigError,
@@ -163,9 +164,8 @@ class BeliefFeaturizer:
         n = self.config.n_agents
         if len(self.possible_agents) != n:
             raise ValueError(f"env has {len(self.possible_agents)} agents, its config {n}")
-        # the bank's own checks against the team (n_particles_total >= N - 1) now, not at
-        # the first reset() after the wrapped env was reset; it draws no number
-        TrackerBank(self.config, self.tracker_params, seed=0)
+        # the bank's own check against the team now, not at the first reset()
+        check_particle_budget(self.tracker_params, n)
         self.n_neighbours = n - 1
         self.size = FEATURES_PER_NEIGHBOUR * self.n_neighbours
         d = self.config.arena_size_m * math.sqrt(2.0)
