@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -181,12 +182,21 @@ def _stop_pool(ex: Any) -> None:
     # no public API kills a pool's workers; _processes is there from Python 3.8 to 3.14
     # (shutdown() sets it to None, so it is read first)
     procs = list((getattr(ex, "_processes", None) or {}).values())
+    manager = getattr(ex, "_executor_manager_thread", None)
     ex.shutdown(wait=False, cancel_futures=True)
     for proc in procs:
         if proc.is_alive():
             proc.terminate()
+    # The pool's manager thread reaps the killed workers too; a join here can lose that
+    # race and return while the process still reads as alive (waitpid already taken), so
+    # wait for the manager thread, then for every exit code to be set.
+    deadline = time.monotonic() + 10.0
+    if manager is not None:
+        manager.join(timeout=5.0)
     for proc in procs:
-        proc.join(timeout=5.0)
+        proc.join(timeout=max(0.0, deadline - time.monotonic()))
+        while proc.exitcode is None and time.monotonic() < deadline:
+            time.sleep(0.01)
 
 
 def _map_ray(
