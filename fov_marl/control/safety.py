@@ -196,6 +196,22 @@ spacing (``tests/test_safety_acceptance.py``), and so does the stress grid's see
 collision (one outlying detection re-seeded a neighbour's cloud onto the robot itself,
 ``TrackerParams.ess_recovery``) run on the tracker without its fused recovery.
 
+The cone of bearings of Section 1b is drawn around the posterior's mean, so the same
+disagreement opens a bearing: a posterior outside its own ellipse puts the truth
+outside its cone. Measured (issue 10's grid, ``straight`` and every other adversary,
+N = 24, β = 360°, robots packed 1.1 m apart in a corner, seed 60001): at step 5 robot
+18's posterior of robot 16, 1.1 m away and detected, was 0.70 m and 37° off the truth,
+outside its 95% ellipse; the detection was 32° off it. In the safe fallback robot 18
+kept its QP's escape at 1 m/s, 84° from the true bearing and 30° outside the
+posterior's cone, and the pair closed from 1.100 m to 1.096 m in one step. So with
+``ControllerParams.detection_cone`` (default on; it acts only with the detection rows
+and a bearing cone) each detection row with ``h_z < 0`` gets the two edges of the
+*detection's* cone, ``α_z = asin(min(1, z_δ σ_t / ‖z‖))`` with σ_t the camera's std
+across the line of sight, capped at ``bearing_cone_max_deg`` (43° at 1.1 m, 16° at
+2.77 m), with the detection row's ``b`` (0 there: approach only, never a push). The
+robot then approaches no bearing of either cone; robot 18 stops translating and turns,
+and the episode keeps its 1.1 m spacing (``tests/test_safety_acceptance.py``).
+
 2. Blind rows: a speed bound per direction from the particles (Eq. 4)
 ====================================================================
 
@@ -756,6 +772,49 @@ def bearing_cone(
     return np.where(ok, sin_a, 0.0), ok & (np.asarray(h) < 0.0)
 
 
+def _cone_rows(
+    mean_body: np.ndarray,
+    cov_body: np.ndarray,
+    n: np.ndarray,
+    b: np.ndarray,
+    h: np.ndarray,
+    max_rad: float,
+    risk: float,
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """The two edge rows of the cone of bearings (Sections 1b and 1d) where ``h < 0``.
+
+    Args:
+        mean_body, cov_body: ``(R, M, 2)``, ``(R, M, 2, 2)`` the Gaussian the cone is
+            drawn around (the posterior, or the detection with Σ_MEAS), in Σ_i.
+        n: ``(R, M, 2)`` its unit lines of sight. b: ``(R, M)`` the row's offset (m/s),
+            which the edges take over. h: ``(R, M)`` the row's barrier value (m); +inf,
+            or ≥ 0, where there is no cone.
+        max_rad: the cap on the half-angle α. risk: δ.
+
+    Returns:
+        Two ``(A (R, M, 3), b (R, M), kind (R, M) int8, h (R, M))`` blocks of
+        :class:`SafetyRows`, ``n_± = cos α n ± sin α t`` (b, h = +inf and kind = −1
+        where there is no cone).
+    """
+    sin_a, inside = bearing_cone(mean_body, cov_body, h, risk_quantile(risk))
+    sin_a = np.minimum(sin_a, math.sin(max_rad))
+    cos_a = np.sqrt(1.0 - sin_a * sin_a)
+    t = np.stack([-n[..., 1], n[..., 0]], -1)
+    out = []
+    for sign in (1.0, -1.0):
+        A = np.zeros(n.shape[:-1] + (3,))
+        A[..., 0:2] = -(cos_a[..., None] * n + sign * sin_a[..., None] * t)
+        out.append(
+            (
+                A,
+                np.where(inside, b, np.inf),
+                np.where(inside, ROW_CONE, -1).astype(np.int8),
+                np.where(inside, h, np.inf),
+            )
+        )
+    return out
+
+
 def particle_halfplane_offsets(
     p_body: np.ndarray, counts: np.ndarray, n_body: np.ndarray, risk: float
 ) -> np.ndarray:
@@ -1287,6 +1346,7 @@ def team_safety_rows(
         undetected_quantile=params.undetected_quantile,
         bearing_cone_max_rad=math.radians(params.bearing_cone_max_deg),
         detection_body=detection_body if params.detection_rows else None,
+        detection_cone=params.detection_cone,
         meas_cov_xy=np.diag(np.asarray(config.meas_cov_diag[:2], dtype=np.float64)),
     )
 
@@ -1393,6 +1453,7 @@ def safety_rows(
     bearing_cone_max_rad: float = 0.0,
     detection_body: np.ndarray | None = None,
     meas_cov_xy: np.ndarray | None = None,
+    detection_cone: bool = True,
 ) -> SafetyRows:
     """All collision rows of every robot (module docstring, Sections 1-3).
 
@@ -1429,13 +1490,17 @@ def safety_rows(
             Σ_i (m, NaN: not detected) and ``(2, 2)`` Σ_MEAS of the position (m²), for
             the rows on the camera's own report (Section 1d, :func:`detection_rows`);
             None: no such rows.
+        detection_cone: with the detection rows and ``bearing_cone_max_rad > 0``, the
+            edges of the detection's own cone of bearings (Σ_MEAS) where its barrier
+            ``h_z < 0`` (Section 1d; False: ablation).
         The rest: scenario quantities and the ``ControllerParams`` fields of the
         same names.
 
     Returns:
-        :class:`SafetyRows` with up to ``K = 5 M + 2 blind_bins + 5`` rows per robot
-        (padded; ``M`` fewer without the detection rows, ``2 M`` fewer without the
-        bearing cone).
+        :class:`SafetyRows` with up to ``K = 7 M + 2 blind_bins + 5`` rows per robot
+        (padded; without the detection rows ``M`` fewer, or ``3 M`` with the bearing
+        cone, whose edges they bring too; without the bearing cone ``2 M`` fewer, or
+        ``4 M`` with the detection rows).
     """
     mu = np.asarray(mean_body, dtype=np.float64)
     R, M = mu.shape[0], mu.shape[1]
@@ -1479,28 +1544,25 @@ def safety_rows(
         blocks_k.append(np.where(keep, ROW_NEIGHBOUR, -1).astype(np.int8))
         blocks_h.append(np.where(keep, h, np.inf))
         if bearing_cone_max_rad > 0.0:  # Section 1b: within D_s, the bearing's cone
-            sin_a, inside = bearing_cone(mu, cov_body, h, risk_quantile(safety_risk))
-            sin_a = np.minimum(sin_a, math.sin(bearing_cone_max_rad))
-            inside &= keep & det  # undetected: the half-plane bound only (Section 1b)
-            cos_a = np.sqrt(1.0 - sin_a * sin_a)
-            t = np.stack([-n[..., 1], n[..., 0]], -1)
-            for sign in (1.0, -1.0):
-                A2 = np.zeros((R, M, 3))
-                A2[..., 0:2] = -(cos_a[..., None] * n + sign * sin_a[..., None] * t)
-                blocks_A.append(A2)
-                blocks_b.append(np.where(inside, b, np.inf))
-                blocks_k.append(np.where(inside, ROW_CONE, -1).astype(np.int8))
-                blocks_h.append(np.where(inside, h, np.inf))
+            # undetected: the half-plane bound only (Section 1b)
+            h_cone = np.where(keep & det, h, np.inf)
+            for x in _cone_rows(mu, cov_body, n, b, h_cone, bearing_cone_max_rad, safety_risk):
+                for blocks, y in zip((blocks_A, blocks_b, blocks_k, blocks_h), x, strict=True):
+                    blocks.append(y)
 
     if detection_body is not None and meas_cov_xy is not None and M:
         # Section 1d: the camera's own report bounds the approach, never pushes
         n_z, s_z = detection_rows(detection_body, meas_cov_xy, risk_quantile(safety_risk))
-        for blocks, x in zip(
-            (blocks_A, blocks_b, blocks_k, blocks_h),
-            _approach_only_rows(n_z, s_z, ROW_NEIGHBOUR, safety_distance_m, m_arc, gain),
-            strict=True,
-        ):
+        det_rows = _approach_only_rows(n_z, s_z, ROW_NEIGHBOUR, safety_distance_m, m_arc, gain)
+        for blocks, x in zip((blocks_A, blocks_b, blocks_k, blocks_h), det_rows, strict=True):
             blocks.append(x)
+        if detection_cone and bearing_cone_max_rad > 0.0:  # Section 1d: the detection's cone
+            z_body = np.where(np.isfinite(s_z)[..., None], detection_body, 0.0)
+            cov_z = np.broadcast_to(np.asarray(meas_cov_xy, np.float64), z_body.shape + (2,))
+            _, b_z, _, h_z = det_rows
+            for x in _cone_rows(z_body, cov_z, n_z, b_z, h_z, bearing_cone_max_rad, safety_risk):
+                for blocks, y in zip((blocks_A, blocks_b, blocks_k, blocks_h), x, strict=True):
+                    blocks.append(y)
 
     if blind_bins > 0 and particles_body is not None and M:
         # beyond this range a row allows ≥ v_max: it would be pruned
