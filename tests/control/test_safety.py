@@ -1247,6 +1247,53 @@ def test_detection_rows_bound_the_approach_to_what_the_camera_sees_and_never_pus
     assert none.robot(0)[2].size == without.robot(0)[2].size
 
 
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000), st.floats(1.05, 3.2), st.floats(-50.0, 50.0))
+def test_the_detection_cone_covers_what_the_camera_sees_whatever_the_posterior(seed, r, off_deg):
+    """Section 1d: a detected neighbour whose posterior sits ``off_deg`` off the camera's
+    bearing (the packed-corner case: 0.70 m and 37° off, outside its own cone). Where the
+    detection's barrier is negative, every velocity the rows allow has ``p · v ≤ 0`` for
+    each direction p of the detection's cone (α_z from Σ_MEAS, capped at 45°); beyond it
+    there are no such rows, and none with ``detection_cone=False``. The cone's rows never
+    push (b = 0 where they exist)."""
+    rng = np.random.default_rng(seed)
+    phi = rng.uniform(-math.pi, math.pi)
+    psi_mu = phi + math.radians(off_deg)
+    cov_meas = np.diag([0.1, 0.1])
+    zq = risk_quantile(0.01)
+    cap = math.radians(45.0)
+    kw = dict(
+        mean_body=(r * np.array([math.cos(psi_mu), math.sin(psi_mu)]))[None, None],
+        cov_body=_spd(rng, 0.1)[None, None],
+        detected=np.ones((1, 1), bool),
+        walls=False,
+        blind_bins=0,
+        bearing_cone_max_rad=cap,
+        detection_body=(r * np.array([math.cos(phi), math.sin(phi)]))[None, None],
+        meas_cov_xy=cov_meas,
+    )
+    rows = _rows(**kw)
+    off = _rows(detection_cone=False, **kw)
+    keep = rows.kind[0] >= 0
+    A, b, kind = rows.A[0][keep], rows.b[0][keep], rows.kind[0][keep]
+    m_arc = arc_margin(CFG.v_max_mps, CFG.omega_max_radps, CFG.dt_s)
+    h_z = r - zq * math.sqrt(0.1) - CFG.safety_distance_m - m_arc
+    n_cone = np.sum(kind == ROW_CONE) - np.sum(off.kind[0] == ROW_CONE)
+    assert n_cone == (2 if h_z < 0.0 else 0)
+    if h_z >= 0.0:
+        return
+    cones = (kind == ROW_CONE) & np.isclose(b, 0.0)
+    assert np.sum(cones) >= 2
+    alpha = math.asin(min(zq * math.sqrt(0.1) / r, math.sin(cap)))
+    v = rng.uniform(-1.0, 1.0, size=(4000, 2))
+    u = np.concatenate([v, np.zeros((4000, 1))], 1)
+    ok = (u @ A.T + b >= -1e-12).all(axis=1)
+    p = np.stack([np.cos(phi + np.linspace(-alpha, alpha, 41)),
+                  np.sin(phi + np.linspace(-alpha, alpha, 41))], 1)  # fmt: skip
+    if ok.any():
+        assert (v[ok] @ p.T).max() <= 1e-9
+
+
 def test_detection_rows_are_the_filters_and_not_pfcbfs():
     """``detection_rows`` is on in the safety filter (FILTER_CONTROLLER_DEFAULTS), off in
     ControllerParams (pfcbf), and the pipeline passes the camera's report: a seen
