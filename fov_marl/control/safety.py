@@ -1550,6 +1550,7 @@ def safety_rows(
         if bearing_cone_max_rad > 0.0:  # Section 1b: within D_s, the bearing's cone
             # undetected: the half-plane bound only (Section 1b)
             h_cone = np.where(keep & det, h, np.inf)
+            cone_post = h_cone < 0.0  # where the posterior's cone applies (Section 1d)
             for x in _cone_rows(mu, cov_body, n, b, h_cone, bearing_cone_max_rad, safety_risk):
                 for blocks, y in zip((blocks_A, blocks_b, blocks_k, blocks_h), x, strict=True):
                     blocks.append(y)
@@ -1564,6 +1565,7 @@ def safety_rows(
             z_body = np.where(np.isfinite(s_z)[..., None], detection_body, 0.0)
             cov_z = np.broadcast_to(np.asarray(meas_cov_xy, np.float64), z_body.shape + (2,))
             _, b_z, _, h_z = det_rows
+            h_z = np.where(cone_post, h_z, np.inf)  # only where the posterior's cone is
             for x in _cone_rows(z_body, cov_z, n_z, b_z, h_z, bearing_cone_max_rad, safety_risk):
                 for blocks, y in zip((blocks_A, blocks_b, blocks_k, blocks_h), x, strict=True):
                     blocks.append(y)

@@ -1252,10 +1252,11 @@ def test_detection_rows_bound_the_approach_to_what_the_camera_sees_and_never_pus
 def test_the_detection_cone_covers_what_the_camera_sees_whatever_the_posterior(seed, r, off_deg):
     """Section 1d: a detected neighbour whose posterior sits ``off_deg`` off the camera's
     bearing (the packed-corner case: 0.70 m and 37° off, outside its own cone). Where the
-    detection's barrier is negative, every velocity the rows allow has ``p · v ≤ 0`` for
-    each direction p of the detection's cone (α_z from Σ_MEAS, capped at 45°); beyond it
-    there are no such rows, and none with ``detection_cone=False``. The cone's rows never
-    push (b = 0 where they exist)."""
+    detection's barrier and the posterior's are both negative (within D_s, where the
+    posterior's cone applies), every velocity the rows allow has ``p · v ≤ 0`` for each
+    direction p of the detection's cone (α_z from Σ_MEAS, capped at 45°); elsewhere there
+    are no such rows, and none with ``detection_cone=False``. The cone's rows never push
+    (b = 0 where they exist)."""
     rng = np.random.default_rng(seed)
     phi = rng.uniform(-math.pi, math.pi)
     psi_mu = phi + math.radians(off_deg)
@@ -1278,9 +1279,11 @@ def test_the_detection_cone_covers_what_the_camera_sees_whatever_the_posterior(s
     A, b, kind = rows.A[0][keep], rows.b[0][keep], rows.kind[0][keep]
     m_arc = arc_margin(CFG.v_max_mps, CFG.omega_max_radps, CFG.dt_s)
     h_z = r - zq * math.sqrt(0.1) - CFG.safety_distance_m - m_arc
+    h_post = off.h[0][0]  # the posterior's row comes first
     n_cone = np.sum(kind == ROW_CONE) - np.sum(off.kind[0] == ROW_CONE)
-    assert n_cone == (2 if h_z < 0.0 else 0)
-    if h_z >= 0.0:
+    inside = h_z < 0.0 and h_post < 0.0
+    assert n_cone == (2 if inside else 0)
+    if not inside:
         return
     cones = (kind == ROW_CONE) & np.isclose(b, 0.0)
     assert np.sum(cones) >= 2
