@@ -231,12 +231,13 @@ field                        default   source / reason
                                        sees (:mod:`~fov_marl.control.safety` Section
                                        1d); on in ``SafetyFilterWrapper``, off in pfcbf
 ``detection_cone``           True      with ``detection_rows`` and a bearing cone, the
-                                       detection's row within D_s also gets the edges
-                                       of its own cone of bearings (Σ_MEAS), so a
-                                       posterior off the truth does not open a bearing
-                                       towards a neighbour the camera sees (Section
-                                       1d). Measured: without it a packed robot in the
-                                       safe fallback closed from 1.100 m to 1.096 m
+                                       detection's row also gets the edges of its own
+                                       cone of bearings (Σ_MEAS) where the posterior's
+                                       cone applies (both within D_s), so a posterior
+                                       off the truth does not open a bearing towards a
+                                       neighbour the camera sees (Section 1d).
+                                       Measured: without it a packed robot in the safe
+                                       fallback closed from 1.100 m to 1.096 m
 ``lost_fov_yield``           True      the FoV levels of neighbours the camera does not
                                        report yield when they stall the robot
                                        (:meth:`~fov_marl.control.controller.
@@ -455,7 +456,8 @@ class ControllerParams:
             which only takes approach away; needs the pipeline's observations.
         detection_cone: with ``detection_rows`` and ``bearing_cone_max_deg > 0``, the
             detection's row gets the edges of its own cone of bearings where its barrier
-            is negative (:mod:`~fov_marl.control.safety` Section 1d); False: ablation.
+            and the posterior's are negative (:mod:`~fov_marl.control.safety` Section
+            1d); False: ablation.
         look_fraction: spent fraction of the blind travel budget (along a bearing u*
             still approaches) from which the look before the leap turns the robot, in
             (0, 1]; 1 (with 1 µm of slack for the float32 actions): once it is spent.
