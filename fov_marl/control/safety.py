@@ -216,7 +216,9 @@ was first added wherever ``h_z < 0`` (a detection within 2.77 m at the default n
 where the posterior's band reaches D_s only within ~2.4 m): the learned policy behind
 the filter then lost 0.0036 of final η (N = 6, seeds 0-19: 0.9928 against 0.9964
 without the cone, lower in 15 of 20 seeds); with the posterior's condition 0.9969
-(3 seeds differ).
+(3 seeds differ). Stress grid (every adversary, N 2-24, β 45-360°, all starts, seed
+60000): 0 collisions and every packed start at 1.100 m with either rule (1,520 and 760
+episodes), no D_s event from an open start.
 
 2. Blind rows: a speed bound per direction from the particles (Eq. 4)
 ====================================================================
