@@ -1516,6 +1516,12 @@ def safety_rows(
     gain = responsibility * safety_gain
     blocks_A, blocks_b, blocks_k, blocks_h = [], [], [], []
 
+    def add(block: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> None:
+        for blocks, x in zip((blocks_A, blocks_b, blocks_k, blocks_h), block, strict=True):
+            blocks.append(x)
+
+    cone_post = np.zeros((R, M), dtype=bool)  # where the posterior's cone applies
+
     if M:
         n, s = neighbour_halfplanes(mu, cov_body, risk_quantile(safety_risk))
         det = np.asarray(detected, dtype=bool)
@@ -1554,25 +1560,22 @@ def safety_rows(
         if bearing_cone_max_rad > 0.0:  # Section 1b: within D_s, the bearing's cone
             # undetected: the half-plane bound only (Section 1b)
             h_cone = np.where(keep & det, h, np.inf)
-            cone_post = h_cone < 0.0  # where the posterior's cone applies (Section 1d)
-            for x in _cone_rows(mu, cov_body, n, b, h_cone, bearing_cone_max_rad, safety_risk):
-                for blocks, y in zip((blocks_A, blocks_b, blocks_k, blocks_h), x, strict=True):
-                    blocks.append(y)
+            cone_post = h_cone < 0.0
+            for edge in _cone_rows(mu, cov_body, n, b, h_cone, bearing_cone_max_rad, safety_risk):
+                add(edge)
 
     if detection_body is not None and meas_cov_xy is not None and M:
         # Section 1d: the camera's own report bounds the approach, never pushes
         n_z, s_z = detection_rows(detection_body, meas_cov_xy, risk_quantile(safety_risk))
         det_rows = _approach_only_rows(n_z, s_z, ROW_NEIGHBOUR, safety_distance_m, m_arc, gain)
-        for blocks, x in zip((blocks_A, blocks_b, blocks_k, blocks_h), det_rows, strict=True):
-            blocks.append(x)
+        add(det_rows)
         if detection_cone and bearing_cone_max_rad > 0.0:  # Section 1d: the detection's cone
             z_body = np.where(np.isfinite(s_z)[..., None], detection_body, 0.0)
             cov_z = np.broadcast_to(np.asarray(meas_cov_xy, np.float64), z_body.shape + (2,))
             _, b_z, _, h_z = det_rows
             h_z = np.where(cone_post, h_z, np.inf)  # only where the posterior's cone is
-            for x in _cone_rows(z_body, cov_z, n_z, b_z, h_z, bearing_cone_max_rad, safety_risk):
-                for blocks, y in zip((blocks_A, blocks_b, blocks_k, blocks_h), x, strict=True):
-                    blocks.append(y)
+            for edge in _cone_rows(z_body, cov_z, n_z, b_z, h_z, bearing_cone_max_rad, safety_risk):
+                add(edge)
 
     if blind_bins > 0 and particles_body is not None and M:
         # beyond this range a row allows ≥ v_max: it would be pruned
@@ -1622,12 +1625,7 @@ def safety_rows(
             max_age_s=last_seen_max_age_s,
             release=last_seen_release,
         )
-        for blocks, x in zip(
-            (blocks_A, blocks_b, blocks_k, blocks_h),
-            _approach_only_rows(n_c, h_c, ROW_LAST_SEEN, safety_distance_m, m_arc, gain),
-            strict=True,
-        ):
-            blocks.append(x)
+        add(_approach_only_rows(n_c, h_c, ROW_LAST_SEEN, safety_distance_m, m_arc, gain))
 
     if blind_travel_body is not None and blind_travel_m > 0.0:
         e = np.asarray(blind_travel_body, dtype=np.float64)
