@@ -314,6 +314,7 @@ def bench_batched_filter(
     looped: bool = True,
     tracker_overrides: dict[str, Any] | None = None,
     tracker_threads: int = 1,
+    draw_ahead: bool = True,
 ) -> list[dict]:
     """Safety filter (or pfcbf) cost per robot-step, looped over copies vs batched, one run.
 
@@ -340,14 +341,39 @@ def bench_batched_filter(
             the policy's settings, e.g. ``{"n_particles_total": 500}``.
         tracker_threads: the batched pipeline's ``tracker_threads`` (the looped variant
             keeps 1); the actions are the same for every count.
+        draw_ahead: :data:`fov_marl.estimation.tracker.DRAW_AHEAD` for this run (serial
+            chunks draw the next chunk's noise on a helper thread); False draws inline,
+            the comparison. The actions are the same either way.
 
     Returns:
         One dict per B: ``n_copies``, ``n_agents``, ``robots`` (B N), ``robot_steps``,
         ``looped_ms`` and ``batched_ms`` (wall ms per robot-step), ``looped_cpu_ms`` /
         ``batched_cpu_ms`` (process CPU time), ``speedup`` (looped / batched, wall),
         ``batched_stage_ms`` (tracker, safety_rows, qp, lloyd per robot-step),
-        ``max_action_diff``, ``n_particles_total``, ``tracker_threads``, ``load_1min``.
+        ``max_action_diff``, ``n_particles_total``, ``tracker_threads``, ``draw_ahead``,
+        ``load_1min``.
     """
+    import fov_marl.estimation.tracker as tracker_module
+
+    before = tracker_module.DRAW_AHEAD
+    tracker_module.DRAW_AHEAD = bool(draw_ahead)
+    try:
+        rows = _bench_batched_filter(
+            n_copies, n_agents, steps, warmup, seed, scenario, policy, looped,
+            tracker_overrides, tracker_threads,
+        )  # fmt: skip
+    finally:
+        tracker_module.DRAW_AHEAD = before
+    for r in rows:
+        r["draw_ahead"] = bool(draw_ahead)
+    return rows
+
+
+def _bench_batched_filter(
+    n_copies, n_agents, steps, warmup, seed, scenario, policy, looped, tracker_overrides,
+    tracker_threads,
+) -> list[dict]:  # fmt: skip
+    """:func:`bench_batched_filter`'s body."""
     from dataclasses import replace
 
     from fov_marl.config import make_config
@@ -775,7 +801,8 @@ def issue12_summary(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             threads = r.get("tracker_threads", 1)
             add(
                 f"filter ms/robot-step, B*N={r['robots']}, P_T={r.get('n_particles_total')}"
-                + (f", tracker threads={threads}" if threads > 1 else ""),
+                + (f", tracker threads={threads}" if threads > 1 else "")
+                + ("" if r.get("draw_ahead", True) else ", draws inline (comparison)"),
                 r["batched_ms"],
                 "<= 0.1 ms",
                 r["batched_ms"] <= 0.1,
@@ -874,7 +901,14 @@ def run_benchmarks(
     rows.extend(bench_filtered_step(steps=5 if quick else 20, warmup=1 if quick else 5))
     # at B N = 384 (the issue's figure): the reduced particle budget, and both budgets
     # with the tracker on 2 threads (wall time; same actions)
-    for p_t, threads in ((FAST_FILTER_PARTICLES, 1), (2000, 2), (FAST_FILTER_PARTICLES, 2)):
+    # (and the default budget on 1 thread with the chunks' draws inline, the comparison
+    # for the draws ahead: same actions)
+    for p_t, threads, ahead in (
+        (2000, 1, False),
+        (FAST_FILTER_PARTICLES, 1, True),
+        (2000, 2, True),
+        (FAST_FILTER_PARTICLES, 2, True),
+    ):
         for r in bench_batched_filter(
             n_copies=(64,),
             steps=3 if quick else 10,
@@ -882,6 +916,7 @@ def run_benchmarks(
             looped=False,
             tracker_overrides={"n_particles_total": p_t},
             tracker_threads=threads,
+            draw_ahead=ahead,
         ):
             rows.append({"section": "vector_filter", "policy": "filter", **r})
     if ppo:

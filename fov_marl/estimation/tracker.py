@@ -84,6 +84,11 @@ also drive the velocity noise, see
 numbers and then ``standard_normal((2, P_j))`` for fresh velocities (modes of re-seeded
 particles are assigned by stratified prior quantiles, no draw); the reset draws
 ``standard_normal((2, P_T))`` fresh velocities after the initial cloud.
+
+The prediction's draws are the first of a step, so a bank stepping its chunks of robots
+one after the other (``n_threads=1``) draws chunk k + 1's on a helper thread while chunk
+k computes (:data:`DRAW_AHEAD`; a quarter of a step at P_T = 2000 is these draws): the
+same numbers as drawing inline, bit for bit.
 """
 
 from __future__ import annotations
@@ -92,7 +97,7 @@ import math
 import os
 import threading
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
@@ -417,18 +422,33 @@ class _BankCore:
             np.cumsum(c[:-1], out=starts[1:])
         self._starts = starts
 
-    def step(self, act: np.ndarray, obs_arr: np.ndarray) -> None:
-        """Predict (Eq. 2) with the rows' actions, then update with their observations."""
+    def step(self, act: np.ndarray, obs_arr: np.ndarray, drawn: bool = False) -> None:
+        """Predict (Eq. 2) with the rows' actions, then update with their observations.
+
+        ``drawn``: :meth:`draw_step_noise` has already made this step's prediction draws
+        (on a helper thread, :func:`_step_cores`); the numbers are the same either way.
+        """
         det, zx, zy, zh, pose, goal = self._parse(obs_arr)
         if self._M:
-            self._predict(act, pose)
+            self._predict(act, pose, drawn)
         self._tss += self._dt
         self._time += self._dt
         self._update(det, zx, zy, zh, pose)
         self._pose_prev = pose
         self._goal_prev = goal
 
-    def _predict(self, act: np.ndarray, pose_now: np.ndarray) -> None:
+    def draw_step_noise(self) -> None:
+        """The prediction's draws of one step, each row from its own Generator: the first
+        draws of a step (module docstring), so they may be made before :meth:`step` (on
+        another thread, while other rows compute) without changing a number."""
+        if not self._M:
+            return
+        for k, g in enumerate(self._rngs):
+            g.standard_normal(out=self._noise[k])
+            if self._mix:
+                g.random(out=self._uni[k])
+
+    def _predict(self, act: np.ndarray, pose_now: np.ndarray, drawn: bool = False) -> None:
         """Eq. 2: neighbour model + process noise in the old Σ_i, then the inverse own motion."""
         cfg, p = self.config, self.params
         dt = self._dt
@@ -438,10 +458,8 @@ class _BankCore:
         else:
             d_body = world_to_body(pose_now[:, :2], self._pose_prev)
             dyaw = K.wrap(pose_now[:, 2] - self._pose_prev[:, 2])
-        for k, g in enumerate(self._rngs):
-            g.standard_normal(out=self._noise[k])
-            if self._mix:
-                g.random(out=self._uni[k])
+        if not drawn:
+            self.draw_step_noise()
         x, y, h = self._x, self._y, self._h
         if self._mix:
             self._predict_mixture(d_body, dyaw, pose_now)
@@ -1012,9 +1030,11 @@ def _step_cores(cores, bounds, act: np.ndarray, obs_arr: np.ndarray, n_threads: 
     bit-identical (tested). NumPy releases the GIL inside its array loops and its
     Generators' fills, which is where a step spends its time.
     """
-    if n_threads == 1 or len(cores) == 1:
-        for core, (s, e) in zip(cores, bounds, strict=True):
-            core.step(act[s:e], obs_arr[s:e])
+    if len(cores) == 1:
+        cores[0].step(act, obs_arr)
+        return
+    if n_threads == 1:
+        _step_cores_serial(cores, bounds, act, obs_arr)
         return
     pool = _pool(n_threads)
     futures = [
@@ -1023,6 +1043,37 @@ def _step_cores(cores, bounds, act: np.ndarray, obs_arr: np.ndarray, n_threads: 
     ]
     for f in futures:
         f.result()  # a chunk's exception is raised here
+
+
+#: Serial chunks draw the next chunk's prediction noise on a helper thread while the
+#: current chunk computes (:func:`_step_cores_serial`); False draws inline (the same
+#: numbers; the benchmark's comparison, ``fov_marl.bench.bench_draw_ahead``).
+DRAW_AHEAD = True
+
+
+def _step_cores_serial(cores, bounds, act: np.ndarray, obs_arr: np.ndarray) -> None:
+    """Step the chunks one after the other on this thread; with :data:`DRAW_AHEAD`, chunk
+    k + 1's prediction draws (:meth:`_BankCore.draw_step_noise`, a quarter of a step's
+    time at P_T = 2000, in NumPy's Generator fills, which release the GIL) are made on a
+    helper thread while chunk k computes. Each chunk draws from its own rows' Generators
+    only, and those draws are the first of its step, so the numbers are those of inline
+    draws (tested). The helper has finished before this returns, also when a chunk
+    raises."""
+    if not DRAW_AHEAD:
+        for core, (s, e) in zip(cores, bounds, strict=True):
+            core.step(act[s:e], obs_arr[s:e])
+        return
+    helper = _pool(1)
+    ahead = None
+    try:
+        for i, (core, (s, e)) in enumerate(zip(cores, bounds, strict=True)):
+            if ahead is not None:
+                ahead.result()
+            ahead = helper.submit(cores[i + 1].draw_step_noise) if i + 1 < len(cores) else None
+            core.step(act[s:e], obs_arr[s:e], drawn=i > 0)
+    finally:
+        if ahead is not None:
+            wait([ahead])  # no draw outlives the step; a chunk's exception propagates
 
 
 class TrackerBank:

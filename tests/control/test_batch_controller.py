@@ -380,6 +380,15 @@ def test_bench_batched_filter_reports_both_variants():
     big = {**t, "section": "vector_filter", "robots": 384, "batched_ms": 0.09}
     (row,) = [x for x in issue12_summary([big]) if "threads" in x["figure"]]
     assert row["figure"].endswith("P_T=2000, tracker threads=2") and row["met"]
+    # the comparison with the chunks' draws inline: flagged, and the module flag restored
+    import fov_marl.estimation.tracker as T
+
+    assert r["draw_ahead"] is True and T.DRAW_AHEAD is True
+    (i,) = bench_batched_filter(n_copies=(2,), n_agents=3, steps=1, warmup=0, draw_ahead=False)
+    assert i["draw_ahead"] is False and T.DRAW_AHEAD is True
+    summary = issue12_summary([{**i, "section": "vector_filter", "robots": 384}])
+    (row,) = [x for x in summary if x["measured"] is not None]
+    assert row["figure"].endswith("P_T=2000, draws inline (comparison)")
     (p,) = bench_batched_filter(n_copies=(2,), n_agents=3, steps=1, warmup=0, policy="pfcbf")
     assert p["max_action_diff"] <= 1e-6 and p["batched_stage_ms"]["lloyd"] > 0
     with pytest.raises(ValueError, match="policy"):

@@ -175,6 +175,95 @@ def test_threaded_bank_equals_serial_bit_for_bit(n_threads, monkeypatch):
     assert n_det > 0  # the update's detection branch ran
 
 
+@pytest.mark.parametrize("model", ["mixture", "static"])
+def test_draws_ahead_give_the_inline_numbers(model, monkeypatch):
+    """Serial chunks whose next chunk's prediction noise is drawn on a helper thread
+    (``DRAW_AHEAD``) give the numbers of inline draws, bit for bit: closed loop of 20
+    steps with detections, recoveries and a restarted copy, 4+ chunks."""
+    import fov_marl.estimation.tracker as T
+
+    monkeypatch.setattr(T, "CHUNK_PARTICLES", 600)  # 2 robots per chunk at P_T = 300
+    B, N = 3, 5
+    envs = [fov_coverage_v0.parallel_env(n_agents=N) for _ in range(B)]
+    cfg = envs[0].unwrapped.config
+    params = TrackerParams(motion_model=model, n_particles_total=300)
+    obs = [e.reset(seed=80 + k)[0] for k, e in enumerate(envs)]
+    o = np.stack([_obs(e, x) for e, x in zip(envs, obs, strict=True)])
+    poses = np.stack([e.unwrapped.poses for e in envs])
+    inline = VectorTrackerBank(cfg, params, n_copies=B)
+    ahead = VectorTrackerBank(cfg, params, n_copies=B)
+    assert len(ahead._bounds) >= 4 and ahead.n_threads == 1
+    for bank in (inline, ahead):
+        bank.reset(o, initial_poses_world=poses, seeds=[80, 81, 82])
+    drawn = []
+    real_draw = T._BankCore.draw_step_noise
+
+    def counted(core):
+        drawn.append(core)
+        real_draw(core)
+
+    monkeypatch.setattr(T._BankCore, "draw_step_noise", counted)
+    rng = np.random.default_rng(5)
+    n_det = n_rec = 0
+    for t in range(20):
+        act = rng.uniform(-1, 1, (B, N, 3)).astype(np.float32)
+        obs = [
+            e.step({a: act[k, i] for i, a in enumerate(e.possible_agents)})[0]
+            for k, e in enumerate(envs)
+        ]
+        o = np.stack([_obs(e, x) for e, x in zip(envs, obs, strict=True)])
+        monkeypatch.setattr(T, "DRAW_AHEAD", False)
+        inline.step(act, o)
+        monkeypatch.setattr(T, "DRAW_AHEAD", True)
+        drawn.clear()
+        ahead.step(act, o)
+        # every chunk drew once: the first inline, the others on the helper
+        assert sorted(map(id, drawn)) == sorted(map(id, ahead._cores))
+        if t == 9:
+            o[1] = _obs(envs[1], envs[1].reset(seed=6)[0])
+            for bank in (inline, ahead):
+                bank.reset_copies([1], o, seeds=[6])
+        ei, ea = inline.estimate(), ahead.estimate()
+        n_det += int(ei.detected.sum())
+        n_rec += int(ei.recovered.sum())
+        for f in fields(BankEstimate):
+            a, b = getattr(ei, f.name), getattr(ea, f.name)
+            if isinstance(a, np.ndarray):
+                np.testing.assert_array_equal(a, b, err_msg=f"step {t}: {f.name}")
+        np.testing.assert_array_equal(inline.particles_all()[0], ahead.particles_all()[0])
+    assert n_det > 0 and n_rec > 0  # the detection and recovery branches ran
+
+
+def test_draws_ahead_end_before_a_chunks_error_reaches_the_caller(monkeypatch):
+    """A chunk that raises while the helper draws the next chunk's noise: the caller gets
+    the chunk's exception only once the helper has finished (no draw outlives the step)."""
+    import threading
+    import time
+
+    import fov_marl.estimation.tracker as T
+
+    monkeypatch.setattr(T, "CHUNK_PARTICLES", 400)
+    env = fov_coverage_v0.parallel_env(n_agents=4)
+    obs = _obs(env, env.reset(seed=1)[0])
+    bank = TrackerBank(env.unwrapped.config, TrackerParams(n_particles_total=200), seed=4)
+    assert len(bank._bounds) >= 2 and bank.n_threads == 1
+    bank.reset(obs)
+    finished = threading.Event()
+
+    def slow_draw(core):
+        time.sleep(0.2)
+        finished.set()
+
+    def boom(core, act, obs_arr, drawn=False):
+        raise FloatingPointError("chunk failed")
+
+    monkeypatch.setattr(T._BankCore, "draw_step_noise", slow_draw)
+    monkeypatch.setattr(T._BankCore, "step", boom)
+    with pytest.raises(FloatingPointError, match="chunk failed"):
+        bank.step(np.zeros((4, 3)), obs)
+    assert finished.is_set()
+
+
 def test_tracker_bank_threads_and_their_errors(monkeypatch):
     import fov_marl.estimation.tracker as T
 
