@@ -1098,7 +1098,8 @@ class TrackerBank:
             are the same for every count (tested). Threads pay off from about 10^5
             particles in the bank (:func:`fov_marl.bench.bench_batched_filter`'s
             ``tracker_threads``); leave 1 where the process already runs one bank per
-            core (``SubprocVectorEnv`` workers).
+            core (``SubprocVectorEnv`` workers). With 1 and several chunks, a helper
+            thread draws the next chunk's noise ahead (:data:`DRAW_AHEAD`, same numbers).
 
     Raises:
         ValueError: bad ``config``, ``params``, ``agent_indices``, ``rngs``, ``seed``,
