@@ -1047,7 +1047,8 @@ def _step_cores(cores, bounds, act: np.ndarray, obs_arr: np.ndarray, n_threads: 
 
 #: Serial chunks draw the next chunk's prediction noise on a helper thread while the
 #: current chunk computes (:func:`_step_cores_serial`); False draws inline (the same
-#: numbers; the benchmark's comparison, ``fov_marl.bench.bench_batched_filter(draw_ahead=False)``).
+#: numbers; the benchmark's comparison,
+#: ``fov_marl.bench.bench_batched_filter(draw_ahead=False)``).
 DRAW_AHEAD = True
 
 
