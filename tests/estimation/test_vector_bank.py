@@ -37,6 +37,25 @@ def _assert_bank_equal(vec: VectorTrackerBank, banks: list[TrackerBank]) -> None
         assert vec.time_s[k] == eb.time_s
 
 
+def _step_envs(envs, act):
+    """Step every env copy with its rows of ``act (B, N, 3)``; ``(B, N, D)`` observations."""
+    obs = [
+        e.step({a: act[k, i] for i, a in enumerate(e.possible_agents)})[0]
+        for k, e in enumerate(envs)
+    ]
+    return np.stack([_obs(e, x) for e, x in zip(envs, obs, strict=True)])
+
+
+def _assert_banks_identical(a: VectorTrackerBank, b: VectorTrackerBank, t: int) -> None:
+    """Every estimate field and every particle of two vector banks, bit for bit."""
+    ea, eb = a.estimate(), b.estimate()
+    for f in fields(BankEstimate):
+        x, y = getattr(ea, f.name), getattr(eb, f.name)
+        if isinstance(x, np.ndarray):
+            np.testing.assert_array_equal(x, y, err_msg=f"step {t}: {f.name}")
+    np.testing.assert_array_equal(a.particles_all()[0], b.particles_all()[0])
+
+
 @pytest.mark.parametrize(
     "scenario,model,known",
     [("coverage", "mixture", True), ("crossing", "crossing", True), ("coverage", "static", False)],
@@ -64,17 +83,12 @@ def test_vector_bank_equals_separate_banks_bit_for_bit(scenario, model, known):
     rng = np.random.default_rng(0)
     for t in range(12):
         act = rng.uniform(-1, 1, (B, N, 3)).astype(np.float32)
-        obs = [
-            e.step({a: act[k, i] for i, a in enumerate(e.possible_agents)})[0]
-            for k, e in enumerate(envs)
-        ]
-        o = np.stack([_obs(e, ob) for e, ob in zip(envs, obs, strict=True)])
+        o = _step_envs(envs, act)
         vec.step(act, o)
         for k, bk in enumerate(banks):
             bk.step(act[k], o[k])
         if t == 6:  # copy 1 starts a new episode with a new seed; copy 0 and 2 go on
-            obs[1] = envs[1].reset(seed=99)[0]
-            o[1] = _obs(envs[1], obs[1])
+            o[1] = _obs(envs[1], envs[1].reset(seed=99)[0])
             poses[1] = envs[1].unwrapped.poses
             vec.reset_copies([1], o, initial_poses_world=poses if known else None, seeds=[99])
             banks[1] = TrackerBank(cfg, params, seed=99)
@@ -154,24 +168,15 @@ def test_threaded_bank_equals_serial_bit_for_bit(n_threads, monkeypatch):
     n_det = 0
     for t in range(20):
         act = rng.uniform(-1, 1, (B, N, 3)).astype(np.float32)
-        obs = [
-            e.step({a: act[k, i] for i, a in enumerate(e.possible_agents)})[0]
-            for k, e in enumerate(envs)
-        ]
-        o = np.stack([_obs(e, x) for e, x in zip(envs, obs, strict=True)])
+        o = _step_envs(envs, act)
         serial.step(act, o)
         threaded.step(act, o)
         if t == 9:
             o[2] = _obs(envs[2], envs[2].reset(seed=5)[0])
             for bank in (serial, threaded):
                 bank.reset_copies([2], o, seeds=[5])
-        es, et = serial.estimate(), threaded.estimate()
-        n_det += int(es.detected.sum())
-        for f in fields(BankEstimate):
-            a, b = getattr(es, f.name), getattr(et, f.name)
-            if isinstance(a, np.ndarray):
-                np.testing.assert_array_equal(a, b, err_msg=f"step {t}: {f.name}")
-        np.testing.assert_array_equal(serial.particles_all()[0], threaded.particles_all()[0])
+        n_det += int(serial.estimate().detected.sum())
+        _assert_banks_identical(serial, threaded, t)
     assert n_det > 0  # the update's detection branch ran
 
 
@@ -207,11 +212,7 @@ def test_draws_ahead_give_the_inline_numbers(model, monkeypatch):
     n_det = n_rec = 0
     for t in range(20):
         act = rng.uniform(-1, 1, (B, N, 3)).astype(np.float32)
-        obs = [
-            e.step({a: act[k, i] for i, a in enumerate(e.possible_agents)})[0]
-            for k, e in enumerate(envs)
-        ]
-        o = np.stack([_obs(e, x) for e, x in zip(envs, obs, strict=True)])
+        o = _step_envs(envs, act)
         monkeypatch.setattr(T, "DRAW_AHEAD", False)
         inline.step(act, o)
         monkeypatch.setattr(T, "DRAW_AHEAD", True)
@@ -223,14 +224,10 @@ def test_draws_ahead_give_the_inline_numbers(model, monkeypatch):
             o[1] = _obs(envs[1], envs[1].reset(seed=6)[0])
             for bank in (inline, ahead):
                 bank.reset_copies([1], o, seeds=[6])
-        ei, ea = inline.estimate(), ahead.estimate()
+        ei = inline.estimate()
         n_det += int(ei.detected.sum())
         n_rec += int(ei.recovered.sum())
-        for f in fields(BankEstimate):
-            a, b = getattr(ei, f.name), getattr(ea, f.name)
-            if isinstance(a, np.ndarray):
-                np.testing.assert_array_equal(a, b, err_msg=f"step {t}: {f.name}")
-        np.testing.assert_array_equal(inline.particles_all()[0], ahead.particles_all()[0])
+        _assert_banks_identical(inline, ahead, t)
     assert n_det > 0 and n_rec > 0  # the detection and recovery branches ran
 
 
