@@ -178,17 +178,20 @@ def test_hierarchy_matches_per_robot_solver_random():
 @example(seed=1771, K=12)
 @example(seed=391, K=14)
 def test_hierarchy_property(seed, K):
-    """Random hierarchies agree within twice the cascade's check tolerance (1e-5, nnls
-    ``tol_check``). Found by hypothesis: seed 1771, K = 12, robot 2, a relaxed
+    """Random hierarchies agree within ten times the cascade's check tolerance (1e-5,
+    nnls ``tol_check``). Found by hypothesis: seed 1771, K = 12, robot 2, a relaxed
     four-level hierarchy on which the two solvers' round-off relaxations of the fixed
     rows (``tol_fix`` = 1e-7 per level) compound to 2.9e-6 in u and 2.2e-6 in κ*; same
     status and QP count. And seed 391, K = 14, robot 1: a relaxed hierarchy with a hard
     row violated by 4e-7 in both and rows on four levels, where the batched solver
     leaves levels 1 and 2 violated by 7e-6 and 1e-5 more than the scalar one: 1.5e-5 in
-    u, 1.0e-5 in κ*, same status. The recorded pfcbf problems and the 300 random ones
-    above still agree within 1e-6."""
+    u, 1.0e-5 in κ*, same status. The differences are round-off and depend on the BLAS
+    kernels: with OpenBLAS's Haswell kernels (``OPENBLAS_CORETYPE=Haswell``, set on some
+    machines of this project) that example differs by 4.8e-5 in u and 1.1e-5 in κ*, the
+    largest over seeds 0-1999 (with the SkylakeX kernels 1.5e-5), hence 1e-4. The
+    recorded pfcbf problems and the 300 random ones above still agree within 1e-6."""
     rng = np.random.default_rng(seed)
-    _check_against_scalar(*_random_hierarchy(rng, 6, K), atol=2e-5)
+    _check_against_scalar(*_random_hierarchy(rng, 6, K), atol=1e-4)
 
 
 def test_hierarchy_invalid_input_and_empty():

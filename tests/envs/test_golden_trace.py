@@ -11,7 +11,13 @@ fingerprint (NumPy version, machine, OS) *and* CPU fingerprint (the SIMD feature
 dispatches on) match; elsewhere it skips. The CPU entered the fingerprint after the same
 NumPy on an AMD EPYC gave other digests for 6 of the 9 cases, from the very code that
 recorded them (presumably NumPy's SIMD loops of transcendental functions, which differ in the last bit between
-instruction sets). :mod:`tests.envs.test_vector_env` covers the batched core against
+instruction sets). The same SIMD features are not enough either: OpenBLAS picks its
+kernels by CPU model, and an AMD EPYC of family 26 with the AVX-512 features of the
+third recording got OpenBLAS's ``Haswell`` kernels and other digests for the five
+coverage cases (with ``OPENBLAS_CORETYPE=SkylakeX`` it gave the third recording's, from
+the reference implementation and from today's code alike). A recording may therefore
+name the OpenBLAS kernel sets that reproduce it (``blas_cores``, read by
+:func:`blas_core`); one that does matches only those. :mod:`tests.envs.test_vector_env` covers the batched core against
 the ParallelEnv on any platform.
 
 To add a CPU: check out the reference implementation (``650fe82``), run this module as
@@ -74,6 +80,33 @@ def cpu_fingerprint() -> str | None:
     return ",".join(sorted(k for k, v in features.items() if v))
 
 
+def blas_core() -> str | None:
+    """The kernel set NumPy's bundled OpenBLAS chose for this CPU (e.g. ``"Haswell"``,
+    ``"SkylakeX"``), or None where it cannot be read (another BLAS, no ``/proc``)."""
+    import ctypes
+
+    try:
+        with open("/proc/self/maps") as f:
+            paths = sorted({ln.split()[-1] for ln in f if "openblas" in ln.lower()})
+    except OSError:
+        return None
+    for path in paths:
+        if "numpy" not in path:
+            continue
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for name in ("scipy_openblas_get_corename64_", "openblas_get_corename64_",
+                     "openblas_get_corename"):  # fmt: skip
+            fn = getattr(lib, name, None)
+            if fn is not None:
+                fn.restype = ctypes.c_char_p
+                core = fn()
+                return core.decode() if core else None
+    return None
+
+
 def trace_digest(scenario: str, seed: int, config: dict, n_steps: int = 200) -> str:
     """SHA-256 of an episode stream of ``n_steps`` steps with automatic unseeded resets."""
     env = MODULES[scenario].parallel_env(**config)
@@ -119,11 +152,14 @@ def _load() -> dict:
 
 @pytest.mark.parametrize("case", CASES, ids=_case_id)
 def test_golden_trace_is_bit_identical(case):
-    plat, cpu = platform_fingerprint(), cpu_fingerprint()
+    plat, cpu, core = platform_fingerprint(), cpu_fingerprint(), blas_core()
     match = [
         r
         for r in _load()["recordings"]
-        if r["platform"] == plat and cpu is not None and r["cpu"] == cpu
+        if r["platform"] == plat
+        and cpu is not None
+        and r["cpu"] == cpu
+        and core in r.get("blas_cores", [core])
     ]
     if not match:
         pytest.skip(f"no golden trace recorded for {plat} on this CPU (see the module docstring)")
@@ -147,6 +183,7 @@ if __name__ == "__main__":  # print a recording (run it from the reference imple
     out = {
         "platform": platform_fingerprint(),
         "cpu": cpu_fingerprint(),
+        "blas_cores": [blas_core()],
         "digests": {_case_id(c): trace_digest(*c) for c in CASES},
     }
     print(json.dumps(out, indent=1))
