@@ -359,9 +359,17 @@ def bench_batched_filter(
     tracker_module.DRAW_AHEAD = bool(draw_ahead)
     try:
         rows = _bench_batched_filter(
-            n_copies, n_agents, steps, warmup, seed, scenario, policy, looped,
-            tracker_overrides, tracker_threads,
-        )  # fmt: skip
+            n_copies=n_copies,
+            n_agents=n_agents,
+            steps=steps,
+            warmup=warmup,
+            seed=seed,
+            scenario=scenario,
+            policy=policy,
+            looped=looped,
+            tracker_overrides=tracker_overrides,
+            tracker_threads=tracker_threads,
+        )
     finally:
         tracker_module.DRAW_AHEAD = before
     for r in rows:
@@ -370,7 +378,7 @@ def bench_batched_filter(
 
 
 def _bench_batched_filter(
-    n_copies, n_agents, steps, warmup, seed, scenario, policy, looped, tracker_overrides,
+    *, n_copies, n_agents, steps, warmup, seed, scenario, policy, looped, tracker_overrides,
     tracker_threads,
 ) -> list[dict]:  # fmt: skip
     """:func:`bench_batched_filter`'s body."""

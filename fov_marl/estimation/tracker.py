@@ -426,7 +426,7 @@ class _BankCore:
         """Predict (Eq. 2) with the rows' actions, then update with their observations.
 
         ``drawn``: :meth:`draw_step_noise` has already made this step's prediction draws
-        (on a helper thread, :func:`_step_cores`); the numbers are the same either way.
+        (on a helper thread, :func:`_step_cores_serial`); the numbers are the same either way.
         """
         det, zx, zy, zh, pose, goal = self._parse(obs_arr)
         if self._M:
