@@ -6,15 +6,23 @@
 code. The package version alone stays the same across commits. Each caller leaves out
 the files that cannot change its episodes (the report, plots, the CLI), so editing
 those keeps the caches.
+
+A file counts by its code, not its text (:func:`code_text`): its syntax tree with the
+docstrings of the module, classes and functions left out, so comments, docstrings and
+formatting (``ruff format``) can be edited without invalidating a sweep's checkpoint
+or reproduce's cache. Any other change, down to one constant, changes the fingerprint.
+Syntax trees are dumped differently by each Python minor version, so a checkpoint
+resumes under the Python version that wrote it.
 """
 
 from __future__ import annotations
 
+import ast
 import hashlib
 from collections.abc import Iterable
 from pathlib import Path
 
-__all__ = ["source_fingerprint", "NOT_EPISODE"]
+__all__ = ["NOT_EPISODE", "code_text", "source_fingerprint"]
 
 #: Files that cannot change any episode (reports, plots, the CLI, benchmarks, the
 #: caches' own modules, training), left out by every caller; a caller adds its own
@@ -29,9 +37,34 @@ NOT_EPISODE: frozenset[str] = frozenset(
 _MEMO: dict[frozenset[str], str] = {}
 
 
+def code_text(source: str | bytes) -> str:
+    """The code of one Python file, for the fingerprint: ``ast.dump`` of its syntax tree
+    (no line or column numbers, so no formatting or comments) with every docstring left
+    out (the first statement of the module, a class or a function when it is a string
+    constant).
+
+    Raises:
+        SyntaxError: ``source`` is not Python.
+    """
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            continue
+        body = node.body
+        if (
+            body
+            and isinstance(body[0], ast.Expr)
+            and isinstance(body[0].value, ast.Constant)
+            and isinstance(body[0].value.value, str)
+        ):
+            node.body = body[1:]
+    return ast.dump(tree)
+
+
 def source_fingerprint(exclude: Iterable[str] = ()) -> str:
     """SHA-256 (hex) of the package's ``*.py`` files: each file's path relative to the
-    package (``/``-separated) then its bytes, in path order.
+    package (``/``-separated) then its code (:func:`code_text`: no docstrings, comments
+    or formatting), in path order.
 
     Args:
         exclude: files to leave out, as relative paths (``"report.py"``), or folders as
@@ -51,6 +84,6 @@ def source_fingerprint(exclude: Iterable[str] = ()) -> str:
             if rel in key or rel.startswith(folders):
                 continue
             h.update(rel.encode())
-            h.update(p.read_bytes())
+            h.update(code_text(p.read_bytes()).encode())
         _MEMO[key] = h.hexdigest()
     return _MEMO[key]

@@ -77,7 +77,8 @@ def episode_key(case: Any, seed: int, steps: int) -> str:
 def code_id() -> str:
     """12 hex digits of :func:`~fov_marl.fingerprint.source_fingerprint` over the
     package's source less :data:`~fov_marl.fingerprint.NOT_EPISODE`: the code that measured a checkpoint's
-    episodes (the package version alone stays the same across commits)."""
+    episodes (the package version alone stays the same across commits). Docstrings,
+    comments and formatting do not count (:func:`~fov_marl.fingerprint.code_text`)."""
     return source_fingerprint(NOT_EPISODE)[:12]
 
 
