@@ -10,7 +10,8 @@ those keeps the caches.
 A file counts by its code, not its text (:func:`code_text`): its syntax tree with the
 docstrings of the module, classes and functions left out, so comments, docstrings and
 formatting (``ruff format``) can be edited without invalidating a sweep's checkpoint
-or reproduce's cache. Any other change, down to one constant, changes the fingerprint.
+or reproduce's cache (no episode reads a docstring; only the CLI's help does). Any other
+change, down to one constant, changes the fingerprint.
 Syntax trees are dumped differently by each Python minor version, so a checkpoint
 resumes under the Python version that wrote it.
 """
