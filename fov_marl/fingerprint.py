@@ -11,9 +11,9 @@ A file counts by its code, not its text (:func:`code_text`): its syntax tree wit
 docstrings of the module, classes and functions left out, so comments, docstrings and
 formatting (``ruff format``) can be edited without invalidating a sweep's checkpoint
 or reproduce's cache (no episode reads a docstring; only the CLI's help does). Any other
-change, down to one constant, changes the fingerprint.
-Syntax trees are dumped differently by each Python minor version, so a checkpoint
-resumes under the Python version that wrote it.
+change, down to one constant, changes the fingerprint. Syntax trees are dumped
+differently by each Python minor version, so a checkpoint resumes under the Python
+version that wrote it.
 """
 
 from __future__ import annotations
@@ -36,6 +36,8 @@ NOT_EPISODE: frozenset[str] = frozenset(
 )
 
 _MEMO: dict[frozenset[str], str] = {}
+#: the nodes that may open with a docstring (``ast.get_docstring`` accepts these only)
+_HAS_DOCSTRING = (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)
 
 
 def code_text(source: str | bytes) -> str:
@@ -49,16 +51,8 @@ def code_text(source: str | bytes) -> str:
     """
     tree = ast.parse(source)
     for node in ast.walk(tree):
-        if not isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
-            continue
-        body = node.body
-        if (
-            body
-            and isinstance(body[0], ast.Expr)
-            and isinstance(body[0].value, ast.Constant)
-            and isinstance(body[0].value.value, str)
-        ):
-            node.body = body[1:]
+        if isinstance(node, _HAS_DOCSTRING) and ast.get_docstring(node, clean=False) is not None:
+            node.body = node.body[1:]
     return ast.dump(tree)
 
 

@@ -348,9 +348,9 @@ def test_filter_acceptance_grid_no_collisions():
     20 episodes × 300 steps per case: 0 collision events in every case. One episode per
     case takes 13-18 min on 2 cores (``fov-marl stress --full --episodes 1``, 760 cases;
     796 s for seed 60003), so this is 4.5-6 h there: run it on a machine with many cores
-    (it uses them all), in pieces with ``--checkpoint``, or
-    select it out (``-k "not acceptance_grid"``; "full_sweep" would also deselect the
-    fuzz suites' ``test_full_sweep``) when running the other slow tests."""
+    (it uses them all), in pieces with ``--checkpoint``, or select it out (``-k "not
+    acceptance_grid"``; "full_sweep" would also deselect the fuzz suites'
+    ``test_full_sweep``) when running the other slow tests."""
     rows = run_stress(default_cases(full=True), episodes=20, steps=300, workers=os.cpu_count() or 1)
     bad = [r for r in rows if r["collisions"]]
     assert not bad, f"\n{len(bad)} / {len(rows)} cases collide\n" + format_stress_table(bad)
