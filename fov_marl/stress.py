@@ -637,7 +637,9 @@ def stored_rows(
 
 
 # ---------------------------------------------------------------- the grid
-def default_cases(full: bool = False, filtered: bool = True) -> list[StressCase]:
+def default_cases(
+    full: bool = False, filtered: bool = True, scenario: str = "coverage"
+) -> list[StressCase]:
     """The issue-10 acceptance grid or a representative subset of it.
 
     Args:
@@ -647,16 +649,24 @@ def default_cases(full: bool = False, filtered: bool = True) -> list[StressCase]
             (the simplest known failure). ``False``: 13 cases covering every adversary,
             every N, every β and every start at least once.
         filtered: behind :class:`~fov_marl.wrappers.SafetyFilterWrapper` or not.
+        scenario: the env every case runs in, ``"coverage"`` (the issue's grid) or
+            ``"crossing"`` (the same cases in the crossing env; the adversaries ignore
+            its mission, so the cases test the filter in that env's config).
+
+    Raises:
+        ValueError: an unknown scenario.
     """
+    if not isinstance(scenario, str) or scenario not in _SCENARIOS:
+        raise ValueError(f"scenario must be one of {_SCENARIOS}, got {scenario!r}")
     if full:
         grid = [
-            StressCase(a, n, b, s, filtered)
+            StressCase(a, n, b, s, filtered, scenario)
             for a, n, b, s in itertools.product(
                 available_adversaries(), FULL_N_AGENTS, FULL_FOV_DEG, FULL_STARTS
             )
         ]
         grid += [
-            StressCase(a, n, b, "head_on_pair", filtered)
+            StressCase(a, n, b, "head_on_pair", filtered, scenario)
             for a, n, b in itertools.product(HEAD_ON_PAIR_ADVERSARIES, FULL_N_AGENTS, FULL_FOV_DEG)
         ]
         return grid
@@ -675,7 +685,7 @@ def default_cases(full: bool = False, filtered: bool = True) -> list[StressCase]
         ("charge_centre", 24, 120.0, "clustered"),
         ("wait_charge", 8, 360.0, "random"),
     ]
-    return [StressCase(a, n, b, s, filtered) for a, n, b, s in quick]
+    return [StressCase(a, n, b, s, filtered, scenario) for a, n, b, s in quick]
 
 
 # ------------------------------------------------------------------- table
@@ -961,7 +971,7 @@ def _cases_from_args(args: argparse.Namespace) -> list[StressCase]:
     if args.quick or (not args.full and not given):
         cases = [
             c
-            for c in default_cases(full=False, filtered=filtered)
+            for c in default_cases(full=False, filtered=filtered, scenario=args.scenario)
             if all(getattr(c, k) in v for k, v in given.items())
         ]
         if not cases:
@@ -991,8 +1001,6 @@ def _cases_from_args(args: argparse.Namespace) -> list[StressCase]:
                 for a, n, b in itertools.product(heads, full["n_agents"], full["fov_deg"])
                 if n >= 2
             ]
-    if args.scenario != "coverage":
-        cases = [StressCase(**{**c.describe(), "scenario": args.scenario}) for c in cases]
     overrides = _env_overrides(args)
     if overrides:
         from fov_marl.config import ConfigError, cli_overrides, source_of_error

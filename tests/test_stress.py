@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -227,6 +228,14 @@ def test_default_cases_cover_the_acceptance_grid():
     assert {c.fov_deg for c in quick} == set(FULL_FOV_DEG)
     assert {c.start for c in quick} == set(available_starts())
     assert not any(c.filtered for c in default_cases(full=False, filtered=False))
+    assert {c.scenario for c in full + quick} == {"coverage"}
+    for full_grid in (False, True):  # the same cases, in the crossing env
+        crossing = default_cases(full=full_grid, scenario="crossing")
+        coverage = default_cases(full=full_grid)
+        assert {c.scenario for c in crossing} == {"crossing"}
+        assert [replace(c, scenario="coverage") for c in crossing] == coverage
+    with pytest.raises(ValueError, match="scenario must be one of"):
+        default_cases(scenario="corridor")
 
 
 def test_format_stress_table():
@@ -306,7 +315,9 @@ def test_cmd_stress_quick_filters_the_subset(capsys, monkeypatch):
     assert {(c.n_agents, c.fov_deg) for c in seen["cases"]} == {(6, 100.0)}
     assert len(seen["cases"]) == len(available_adversaries()) * len(FULL_STARTS)
     cmd_stress(_parser().parse_args("stress --scenario crossing --quick".split()))
-    assert {c.scenario for c in seen["cases"]} == {"crossing"}
+    assert seen["cases"] == default_cases(full=False, scenario="crossing")
+    cmd_stress(_parser().parse_args("stress --scenario crossing --full".split()))
+    assert seen["cases"] == default_cases(full=True, scenario="crossing")
     with pytest.raises(ValueError, match="--quick"):
         cmd_stress(_parser().parse_args("stress --quick --n-agents 3".split()))
 
@@ -335,9 +346,12 @@ def test_bad_flags_name_the_flag(argv, flag, capsys):
 
 
 @pytest.mark.slow
-def test_filter_quick_sweep_no_collisions():
-    """The CI-sized subset of issue 10's acceptance sweep (3 episodes × 300 steps)."""
-    rows = run_stress(default_cases(full=False), episodes=3, steps=300, workers=os.cpu_count() or 1)
+@pytest.mark.parametrize("scenario", ["coverage", "crossing"])
+def test_filter_quick_sweep_no_collisions(scenario):
+    """The CI-sized subset of issue 10's acceptance sweep (3 episodes × 300 steps), in both
+    envs: the filter wraps either, whatever mission the policy ignores."""
+    cases = default_cases(full=False, scenario=scenario)
+    rows = run_stress(cases, episodes=3, steps=300, workers=os.cpu_count() or 1)
     bad = [r for r in rows if r["collisions"]]
     assert not bad, "\n" + format_stress_table(bad)
 
