@@ -238,6 +238,13 @@ field                        default   source / reason
                                        neighbour the camera sees (Section 1d).
                                        Measured: without it a packed robot in the safe
                                        fallback closed from 1.100 m to 1.096 m
+``detection_sector``         False     with ``detection_rows``: a detection reported
+                                       outside the camera sector (noise) pushes no
+                                       robot away, and the sector's edges and axis
+                                       become approach-only rows (:mod:`~fov_marl.
+                                       control.safety` Section 1e). Off: the numbers
+                                       measured so far; the harsh changed env's
+                                       collision (CHANGELOG) needs it
 ``lost_fov_yield``           True      the FoV levels of neighbours the camera does not
                                        report yield when they stall the robot
                                        (:meth:`~fov_marl.control.controller.
@@ -458,6 +465,10 @@ class ControllerParams:
             detection's row gets the edges of its own cone of bearings where its barrier
             and the posterior's are negative (:mod:`~fov_marl.control.safety` Section
             1d); False: ablation.
+        detection_sector: with ``detection_rows``, treat a detection reported outside
+            the camera sector as the camera contradicting its noise
+            (:func:`~fov_marl.control.safety.detection_sector_rows`): no push away, and
+            approach-only rows along the sector's edges and axis.
         look_fraction: spent fraction of the blind travel budget (along a bearing u*
             still approaches) from which the look before the leap turns the robot, in
             (0, 1]; 1 (with 1 µm of slack for the float32 actions): once it is spent.
@@ -548,6 +559,7 @@ class ControllerParams:
     hold_cleanup: bool = True
     detection_rows: bool = False
     detection_cone: bool = True
+    detection_sector: bool = False
     look_fraction: float = 0.75
     look_persistence_deg: float = 0.0
     look_yields_fov: bool = False
@@ -614,6 +626,7 @@ class ControllerParams:
             "hold_band_barrier",
             "detection_rows",
             "detection_cone",
+            "detection_sector",
             "blind_travel_reach",
         ):
             _check_bool(name, getattr(self, name))

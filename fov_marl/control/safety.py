@@ -220,6 +220,25 @@ without the cone, lower in 15 of 20 seeds); with the posterior's condition 0.996
 60000): 0 collisions and every packed start at 1.100 m with either rule (1,520 and 760
 episodes), no D_s event from an open start.
 
+1e. A report the camera contradicts (option)
+-------------------------------------------
+
+The camera reports j only while j's true position lies in the sector F_i, and its noise
+is clipped per axis, so a detected j lies in ``F_i ∩ box(ⁱz_j, clip)``. When the noise is
+of the order of the range the report can fall outside F_i, and then its line of sight
+may point away from j: measured in a changed env (``v_max_mps = 2``, ``dt_s = 0.4``,
+``detection_range_m = 4``, ``meas_cov_diag = (0.5, 0.5, 0.5)``: 0.71 m per axis, clipped
+at 3.5 m), two robots packed 1.1 m apart along a wall, ``straight`` seed 81101: robot 0's
+camera reported its neighbour 1.05 m *behind* it while it stood 1.27 m ahead, in view;
+the neighbour row demanded a retreat from the report, the safe fallback kept the QP's
+full-speed step forward, and the pair collided (1.266 m to 0.472 m). With
+``ControllerParams.detection_sector`` (off by default: the numbers measured so far are
+without it) such a report pushes nobody (its neighbour row's offset is floored at 0,
+before the cone takes it) and the sector's edges and axis, ``θ ∈ {−β/2, 0, β/2}``,
+become approach-only rows with the distance to the clip box as clearance
+(:func:`detection_sector_rows`): with β ≤ π the robot approaches no bearing of F_i,
+with β > π it does not translate towards anything. β = 2π has nothing to contradict.
+
 2. Blind rows: a speed bound per direction from the particles (Eq. 4)
 ====================================================================
 
@@ -513,6 +532,7 @@ __all__ = [
     "blind_density_rows",
     "last_seen_rows",
     "detection_rows",
+    "detection_sector_rows",
     "blind_travel_step",
     "blind_travel_reset",
     "bearing_angles_body",
@@ -1044,6 +1064,50 @@ def detection_rows(
     return np.where(on[..., None], n, 0.0), np.where(on, s, np.inf)
 
 
+def detection_sector_rows(
+    detection_body: np.ndarray, fov_rad: float, range_m: float, clip_xy_m: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the camera's report contradicts the camera (Section 1e): its sector's rows.
+
+    The camera reports neighbour j only while j's *true* position lies in the sector F_i
+    (``|bearing| ≤ β/2``, range ≤ R_d), and its noise is clipped per axis, so j lies in
+    ``F_i ∩ box(ⁱz_j, clip)``. A report outside F_i (noise of the order of the range
+    moves it there: measured, a neighbour 1.27 m ahead reported 1.05 m behind with
+    0.71 m noise) gives a line of sight that may point away from j. For such a report
+    this gives approach-only directions along the sector's edges and its axis,
+    ``θ ∈ {−β/2, 0, +β/2}``: with β ≤ π the axis is implied by the edges and together
+    they forbid approaching any bearing of F_i (the polar cone of the sector); with β > π
+    the three span more than a half-plane and leave no translation towards anything.
+    The clearance is the distance from the robot to the clip box, a lower bound on
+    ``‖ⁱp_j‖``. With β ≥ 2π there is no bearing to contradict and no row.
+
+    Args:
+        detection_body: ``(R, M, 2)`` the last observation's detections in Σ_i (m, NaN:
+            not detected).
+        fov_rad: β. range_m: R_d.
+        clip_xy_m: the noise clip per axis (m), ``meas_noise_clip_sigma`` σ_x, σ_y.
+
+    Returns:
+        ``(n (R, M, 3, 2) unit directions, clear (R, M) m (+inf where the report is in
+        F_i or absent), outside (R, M) bool)``.
+    """
+    zb = np.asarray(detection_body, dtype=np.float64)
+    R, M = zb.shape[:2]
+    th = np.array([-0.5 * fov_rad, 0.0, 0.5 * fov_rad])
+    n = np.broadcast_to(np.stack([np.cos(th), np.sin(th)], -1), (R, M, 3, 2)).copy()
+    if fov_rad >= 2.0 * math.pi:
+        return n, np.full((R, M), np.inf), np.zeros((R, M), dtype=bool)
+    on = np.isfinite(zb).all(axis=-1)
+    z = np.where(on[..., None], zb, 0.0)
+    r = np.hypot(z[..., 0], z[..., 1])
+    bearing = np.arctan2(z[..., 1], z[..., 0])
+    outside = on & ((np.abs(bearing) > 0.5 * fov_rad) | (r > range_m))
+    dx = np.maximum(np.abs(z[..., 0]) - clip_xy_m[0], 0.0)  # distance to the box
+    dy = np.maximum(np.abs(z[..., 1]) - clip_xy_m[1], 0.0)
+    clear = np.where(outside, np.hypot(dx, dy), np.inf)
+    return n, clear, outside
+
+
 def _approach_only_rows(
     n: np.ndarray, clear_m: np.ndarray, kind: int, d_s_m: float, m_arc_m: float, gain: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -1356,6 +1420,11 @@ def team_safety_rows(
         detection_body=detection_body if params.detection_rows else None,
         detection_cone=params.detection_cone,
         meas_cov_xy=np.diag(np.asarray(config.meas_cov_diag[:2], dtype=np.float64)),
+        detection_sector=params.detection_sector,
+        meas_clip_xy_m=(
+            config.meas_noise_clip_sigma * float(config.meas_std[0]),
+            config.meas_noise_clip_sigma * float(config.meas_std[1]),
+        ),
     )
 
 
@@ -1462,6 +1531,8 @@ def safety_rows(
     detection_body: np.ndarray | None = None,
     meas_cov_xy: np.ndarray | None = None,
     detection_cone: bool = True,
+    detection_sector: bool = False,
+    meas_clip_xy_m: tuple[float, float] | None = None,
 ) -> SafetyRows:
     """All collision rows of every robot (module docstring, Sections 1-3).
 
@@ -1501,6 +1572,10 @@ def safety_rows(
         detection_cone: with the detection rows and ``bearing_cone_max_rad > 0``, the
             edges of the detection's own cone of bearings (Σ_MEAS) where its barrier
             ``h_z < 0`` and the posterior's cone applies (Section 1d; False: ablation).
+        detection_sector, meas_clip_xy_m: with the detection rows, a report outside
+            the camera sector (:func:`detection_sector_rows`, Section 1e; the noise clip
+            per axis in m) pushes no robot away (its neighbour row's offset is floored
+            at 0) and adds approach-only rows along the sector's edges and axis.
         The rest: scenario quantities and the ``ControllerParams`` fields of the
         same names.
 
@@ -1521,6 +1596,9 @@ def safety_rows(
             blocks.append(x)
 
     cone_post = np.zeros((R, M), dtype=bool)  # where the posterior's cone applies
+    sector = None
+    if detection_sector and detection_body is not None and meas_clip_xy_m is not None and M:
+        sector = detection_sector_rows(detection_body, fov_rad, detection_range_m, meas_clip_xy_m)
 
     if M:
         n, s = neighbour_halfplanes(mu, cov_body, risk_quantile(safety_risk))
@@ -1552,6 +1630,8 @@ def safety_rows(
             b = safety_gain * g - closing_j
         # undetected: never approach, but never pushed away by a belief (see docstring)
         b = np.where(det, b, np.maximum(b, 0.0))
+        if sector is not None:  # Section 1e: no push from a report the camera contradicts
+            b = np.where(sector[2], np.maximum(b, 0.0), b)
         b = np.where(keep, b, np.inf)
         blocks_A.append(A)
         blocks_b.append(b)
@@ -1576,6 +1656,15 @@ def safety_rows(
             h_z = np.where(cone_post, h_z, np.inf)  # only where the posterior's cone is
             for edge in _cone_rows(z_body, cov_z, n_z, b_z, h_z, bearing_cone_max_rad, safety_risk):
                 add(edge)
+
+    if sector is not None:  # Section 1e: the sector's edges and axis, approach only
+        n_s, clear_s, _ = sector
+        for k in range(3):
+            add(
+                _approach_only_rows(
+                    n_s[..., k, :], clear_s, ROW_CONE, safety_distance_m, m_arc, gain
+                )
+            )
 
     if blind_bins > 0 and particles_body is not None and M:
         # beyond this range a row allows ≥ v_max: it would be pruned

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from fov_marl.config import make_config
@@ -24,6 +24,7 @@ from fov_marl.control.safety import (
     barrier_gain,
     bearing_cone,
     blind_representatives,
+    detection_sector_rows,
     hold_band,
     neighbour_halfplanes,
     neighbour_row_offsets,
@@ -32,7 +33,7 @@ from fov_marl.control.safety import (
     safety_rows,
     wall_clearances,
 )
-from fov_marl.geometry import integrate_unicycle, world_to_body
+from fov_marl.geometry import in_fov, integrate_unicycle, world_to_body
 
 CFG = make_config()
 
@@ -1415,3 +1416,82 @@ def test_reach_clear_cases():
     np.testing.assert_array_equal(reach_clear(c, r, H), [True, False, False, True])
     two = np.array([[[10.0, 0.0], [0.0, 3.0]]])  # one far, one near
     assert not reach_clear(two, np.zeros((1, 2)), H)[0]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.floats(-6.0, 6.0),
+    st.floats(-6.0, 6.0),
+    st.floats(10.0, 360.0),
+    st.floats(0.2, 3.6),
+    st.integers(0, 10_000),
+)
+def test_detection_sector_rows_flag_the_reports_the_camera_could_not_make(
+    zx, zy, beta_deg, clip, seed
+):
+    """Section 1e: a report is flagged exactly when it lies outside the camera sector (β <
+    360°); the clearance is a lower bound on the range of every true position the camera
+    could have reported it from (in the sector, within the clip box of the report)."""
+    assume(math.hypot(zx, zy) > 1e-6)  # the camera never reports a neighbour at the centre
+    fov = math.radians(beta_deg)
+    z = np.array([[[zx, zy]]])
+    n, clear, outside = detection_sector_rows(z, fov, 4.0, (clip, clip))
+    flagged = bool(outside[0, 0])
+    if beta_deg >= 360.0:
+        assert not flagged
+    else:
+        assert flagged == (not bool(in_fov(z[0, 0], fov, 4.0)))
+    np.testing.assert_allclose(np.linalg.norm(n, axis=-1), 1.0)
+    if not flagged:
+        assert clear[0, 0] == math.inf
+        return
+    rng = np.random.default_rng(seed)
+    q = z[0, 0] + rng.uniform(-clip, clip, size=(4000, 2))
+    q = q[in_fov(q, fov, 4.0)]
+    if q.size:
+        assert np.hypot(q[:, 0], q[:, 1]).min() >= clear[0, 0] - 1e-12
+
+
+def test_detection_sector_rows_keep_a_packed_robot_out_of_the_sector():
+    """The harsh env's collision, reconstructed: the camera reports the neighbour 1.05 m
+    *behind* the robot (0.71 m noise per axis, clipped at 3.5 m; β = 120°, R_d = 4 m) and
+    the posterior follows it. Without the option the posterior's row demands a retreat
+    forward and allows the full-speed step into the neighbour, which stands 1.27 m
+    ahead; with it no row pushes, and no allowed velocity approaches any bearing of the
+    sector (where the camera must have seen it): with the posterior's own row (no
+    approach towards the report) the robot may only stand. A report inside the sector
+    changes nothing."""
+    clip = 5.0 * math.sqrt(0.5)
+    kw = dict(
+        mean_body=np.array([[[-0.381, -0.144]]]),
+        cov_body=np.array([[[[0.312, 0.027], [0.027, 0.076]]]]),
+        detected=np.ones((1, 1), bool),
+        meas_cov_xy=np.diag([0.5, 0.5]),
+        fov_rad=math.radians(120.0),
+        detection_range_m=4.0,
+        meas_clip_xy_m=(clip, clip),
+        bearing_cone_max_rad=math.radians(45.0),
+    )
+    report = np.array([[[-1.047, -0.395]]])
+    forward = np.array([1.0, 0.0, 0.0])
+    off = _rows(detection_body=report, **kw)
+    A0, b0, k0 = off.robot(0)
+    # a retreat from the report is demanded, and the step into the neighbour passes the
+    # safe fallback's test (no row worse than standing still: A u + b >= min(b, 0))
+    assert b0[k0 == ROW_NEIGHBOUR].min() < 0.0
+    assert (A0 @ forward + b0 >= np.minimum(b0, 0.0) - 1e-12).all()
+    on = _rows(detection_body=report, detection_sector=True, **kw)
+    A, b, kind = on.robot(0)
+    assert (b[kind == ROW_NEIGHBOUR] >= 0.0).all()
+    assert not (A @ forward + b >= np.minimum(b, 0.0) - 1e-12).all()
+    v = np.random.default_rng(0).uniform(-1.0, 1.0, size=(4000, 2))
+    u = np.concatenate([v, np.zeros((4000, 1))], 1)
+    ok = (u @ A.T + b >= -1e-12).all(axis=1)
+    assert (b >= 0.0).all()  # standing still is allowed: the robot stops and turns
+    th = np.linspace(-math.pi / 3, math.pi / 3, 61)
+    assert (v[ok] @ np.stack([np.cos(th), np.sin(th)]) <= 1e-9).all()
+    inside = np.array([[[1.2, 0.1]]])
+    same = _rows(detection_body=inside, **kw)
+    with_opt = _rows(detection_body=inside, detection_sector=True, **kw)
+    for a, c in zip(same.robot(0), with_opt.robot(0), strict=True):
+        np.testing.assert_array_equal(a, c)
