@@ -221,7 +221,7 @@ without the cone, lower in 15 of 20 seeds); with the posterior's condition 0.996
 episodes), no D_s event from an open start.
 
 1e. A report the camera contradicts (option)
--------------------------------------------
+--------------------------------------------
 
 The camera reports j only while j's true position lies in the sector F_i, and its noise
 is clipped per axis, so a detected j lies in ``F_i ∩ box(ⁱz_j, clip)``. When the noise is
