@@ -505,7 +505,7 @@ from scipy.special import ndtri
 
 from fov_marl.config import ScenarioConfig
 from fov_marl.control.params import ControllerParams
-from fov_marl.geometry import body_to_world, integrate_unicycle
+from fov_marl.geometry import body_to_world, in_fov, integrate_unicycle
 from fov_marl.infos import SAFETY_CAUSES
 from fov_marl.validation import describe
 
@@ -1088,20 +1088,18 @@ def detection_sector_rows(
         clip_xy_m: the noise clip per axis (m), ``meas_noise_clip_sigma`` σ_x, σ_y.
 
     Returns:
-        ``(n (R, M, 3, 2) unit directions, clear (R, M) m (+inf where the report is in
-        F_i or absent), outside (R, M) bool)``.
+        ``(n (3, 2) unit directions, clear (R, M) m (+inf where the report is in F_i or
+        absent), outside (R, M) bool)``; "in F_i" is the camera's own test
+        (:func:`fov_marl.geometry.in_fov`).
     """
     zb = np.asarray(detection_body, dtype=np.float64)
-    R, M = zb.shape[:2]
     th = np.array([-0.5 * fov_rad, 0.0, 0.5 * fov_rad])
-    n = np.broadcast_to(np.stack([np.cos(th), np.sin(th)], -1), (R, M, 3, 2)).copy()
-    if fov_rad >= 2.0 * math.pi:
-        return n, np.full((R, M), np.inf), np.zeros((R, M), dtype=bool)
+    n = np.stack([np.cos(th), np.sin(th)], -1)
     on = np.isfinite(zb).all(axis=-1)
+    if fov_rad >= 2.0 * math.pi:
+        return n, np.full(on.shape, np.inf), np.zeros(on.shape, dtype=bool)
     z = np.where(on[..., None], zb, 0.0)
-    r = np.hypot(z[..., 0], z[..., 1])
-    bearing = np.arctan2(z[..., 1], z[..., 0])
-    outside = on & ((np.abs(bearing) > 0.5 * fov_rad) | (r > range_m))
+    outside = on & ~in_fov(z, fov_rad, range_m)
     dx = np.maximum(np.abs(z[..., 0]) - clip_xy_m[0], 0.0)  # distance to the box
     dy = np.maximum(np.abs(z[..., 1]) - clip_xy_m[1], 0.0)
     clear = np.where(outside, np.hypot(dx, dy), np.inf)
@@ -1631,7 +1629,8 @@ def safety_rows(
         # undetected: never approach, but never pushed away by a belief (see docstring)
         b = np.where(det, b, np.maximum(b, 0.0))
         if sector is not None:  # Section 1e: no push from a report the camera contradicts
-            b = np.where(sector[2], np.maximum(b, 0.0), b)
+            _, _, contradicted = sector
+            b = np.where(contradicted, np.maximum(b, 0.0), b)
         b = np.where(keep, b, np.inf)
         blocks_A.append(A)
         blocks_b.append(b)
@@ -1659,12 +1658,9 @@ def safety_rows(
 
     if sector is not None:  # Section 1e: the sector's edges and axis, approach only
         n_s, clear_s, _ = sector
-        for k in range(3):
-            add(
-                _approach_only_rows(
-                    n_s[..., k, :], clear_s, ROW_CONE, safety_distance_m, m_arc, gain
-                )
-            )
+        for n_k in n_s:
+            n_k = np.broadcast_to(n_k, clear_s.shape + (2,))
+            add(_approach_only_rows(n_k, clear_s, ROW_CONE, safety_distance_m, m_arc, gain))
 
     if blind_bins > 0 and particles_body is not None and M:
         # beyond this range a row allows ≥ v_max: it would be pruned

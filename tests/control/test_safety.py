@@ -1441,6 +1441,7 @@ def test_detection_sector_rows_flag_the_reports_the_camera_could_not_make(
         assert not flagged
     else:
         assert flagged == (not bool(in_fov(z[0, 0], fov, 4.0)))
+    assert n.shape == (3, 2)
     np.testing.assert_allclose(np.linalg.norm(n, axis=-1), 1.0)
     if not flagged:
         assert clear[0, 0] == math.inf
