@@ -62,11 +62,14 @@ from fov_marl.control.batched import (
 from fov_marl.control.safety import (
     SafetyRows,
     bearing_angles_body,
+    bearing_travel_floor,
     bearing_travel_reset,
     bearing_travel_step,
+    bearings_in_view,
     blind_travel_reset,
     blind_travel_step,
     reach_clear,
+    risk_quantile,
     team_safety_rows,
     violated_kind_bits,
 )
@@ -250,6 +253,9 @@ class PfCbfPipeline:
         self._blind_travel_world = np.zeros((R, 2))
         #: approach per world bearing since the camera last looked at it (Section 2e)
         self._bearing_travel = np.zeros((R, self.controller_params.blind_travel_bearings))
+        #: the part of each bearing's budget the neighbours seen at its last look had
+        #: used (Section 2g), kept only with ``blind_travel_prespend``
+        self._bearing_floor = np.zeros_like(self._bearing_travel)
         # the look before the leap's memory: u*'s translation bearing at the last step
         # (rad, Σ_w; NaN: none), read with look_persistence_deg
         self._look_prev_world = np.full(R, np.nan)
@@ -383,6 +389,7 @@ class PfCbfPipeline:
             self.last_timings = {"tracker": time.perf_counter() - t0}
             self._est = self._bank_estimate()
             self._reset_last_seen(np.arange(self.n_rows), init)
+            self._reset_bearing_floor(np.arange(self.n_rows), init)
             self._reset_reach(np.arange(self.n_rows), init)
         elif self.estimates == "oracle":
             self._oracle(init_all)
@@ -413,6 +420,67 @@ class PfCbfPipeline:
             self.config.fov_rad,
             math.pi / max(K, 1),
         )
+
+    def _prespend_on(self) -> bool:
+        par = self.controller_params
+        return bool(
+            par.blind_travel_prespend
+            and par.blind_travel_bearings > 0
+            and par.blind_travel_m > 0
+            and self.estimates == "tracker"
+            and self.config.fov_rad < 2.0 * math.pi
+        )
+
+    def _reset_bearing_floor(self, rows: np.ndarray, init: np.ndarray | None) -> None:
+        """Start the floors of ``rows`` (safety Section 2g): the known start poses ``init
+        (B, N, 3)`` are exact reports at t = 0, seen from every bearing; then this step's
+        detections."""
+        self._bearing_floor[rows] = 0.0
+        if not self._prespend_on():
+            return
+        if init is not None:
+            copy = rows // self.n
+            start_world = np.asarray(init, dtype=np.float64)[copy[:, None], self._ids[rows], :2]
+            start_body = world_to_body(start_world, self._own_pose[rows][:, None, :])
+            par, cfg = self.controller_params, self.config
+            self._bearing_floor[rows] = bearing_travel_floor(
+                start_body,
+                0.0,
+                self._own_pose[rows, 2],
+                self._bearing_floor.shape[1],
+                cfg.safety_distance_m,
+                par.blind_travel_m,
+            )
+        self._update_bearing_floor(rows)
+
+    def _update_bearing_floor(self, rows: np.ndarray) -> None:
+        """Set the floors of the bearings ``rows`` have in view from this step's detections,
+        and raise those out of view that a detection's cone reaches (Section 2g)."""
+        if not self._prespend_on():
+            return
+        par, cfg = self.controller_params, self.config
+        K = self._bearing_floor.shape[1]
+        yaw = self._own_pose[rows, 2]
+        slack = risk_quantile(par.safety_risk) * math.sqrt(max(cfg.meas_cov_diag[:2]))
+        used = bearing_travel_floor(
+            self._detection_body[rows], slack, yaw, K, cfg.safety_distance_m, par.blind_travel_m
+        )
+        seen = bearings_in_view(bearing_angles_body(K, yaw), cfg.fov_rad, math.pi / K)
+        self._bearing_floor[rows] = np.where(
+            seen, used, np.maximum(self._bearing_floor[rows], used)
+        )
+
+    def _bearing_spent(self) -> np.ndarray:
+        """``(B N, K)`` the budget spent per bearing: ``c_k``, plus its floor (Section 2g)
+        for the bearings out of view (those in view get no row from it)."""
+        c = self._bearing_travel
+        if not self._prespend_on():
+            return c
+        K = c.shape[1]
+        seen = bearings_in_view(
+            bearing_angles_body(K, self._own_pose[:, 2]), self.config.fov_rad, math.pi / K
+        )
+        return c + np.where(seen, 0.0, self._bearing_floor)
 
     def _reset_last_seen(self, rows: np.ndarray, init: np.ndarray | None) -> None:
         """Forget the last-seen points of ``rows``; the known start poses ``init (B, N, 3)``
@@ -481,6 +549,7 @@ class PfCbfPipeline:
         horizon = cfg.safety_distance_m + 2.0 * par.blind_travel_m + 2.0 * cfg.v_max_mps * cfg.dt_s
         clear = rows[reach_clear(centre, radius, horizon)]
         self._bearing_travel[clear] = 0.0
+        self._bearing_floor[clear] = 0.0
         return clear
 
     def _last_seen_body(self) -> np.ndarray:
@@ -539,6 +608,7 @@ class PfCbfPipeline:
             )
             self._est = self._bank_estimate()
             self._reset_last_seen(rows, init)
+            self._reset_bearing_floor(rows, init)
             self._reset_reach(rows, init)
         elif self.estimates == "oracle":
             self._oracle(init_all)
@@ -563,6 +633,7 @@ class PfCbfPipeline:
                 self.config.fov_rad,
                 math.pi / self._bearing_travel.shape[1],  # the bin's whole sector
             )
+            self._update_bearing_floor(np.arange(self.n_rows))
         else:  # ... or the single vector (Section 2d)
             self._blind_travel_world = blind_travel_reset(
                 self._blind_travel_world,
@@ -648,7 +719,7 @@ class PfCbfPipeline:
             last_seen_age_s=age,
             blind_travel_body=None if self.estimates == "oracle" else self._blind_travel_body(),
             particle_counts=None if parts is None else e["counts"],
-            bearing_travel_m=None if self.estimates == "oracle" else self._bearing_travel,
+            bearing_travel_m=None if self.estimates == "oracle" else self._bearing_spent(),
             detection_body=self._detection_body if self.estimates == "tracker" else None,
         )
 
@@ -746,7 +817,7 @@ class PfCbfPipeline:
             self._look_prev_world = np.where(np.hypot(ux, uy) > 0.0, course, np.nan)
             trigger = np.where(steady, trigger, par.blind_travel_m - _LOOK_SLACK_M)
         if par.blind_travel_bearings > 0:
-            c = self._bearing_travel
+            c = self._bearing_spent()
             ang = bearing_angles_body(c.shape[1], self._own_pose[:, 2])
             appr = np.cos(ang) * u_star[:, 0:1] + np.sin(ang) * u_star[:, 1:2] > 0.0
             row = np.arange(c.shape[0])

@@ -135,6 +135,14 @@ field                        default   source / reason
                                        Section 2f, :func:`~fov_marl.control.safety.
                                        reach_clear`); opt-in (measured trade-off
                                        there)
+``blind_travel_prespend``    False     per bearing: a bearing reset while the camera
+                                       showed a neighbour within D_s (plus its noise
+                                       margin) there starts partly spent, ``(D_s −
+                                       d) / 2`` (safety Section 2g, :func:`~fov_marl.
+                                       control.safety.bearing_travel_floor`); on in
+                                       the safety filter (a harsh changed env's
+                                       collision needed it), off here: pfcbf's
+                                       sweeps were measured without it
 ``look_fraction``            0.75      the look before the leap turns a robot once this
                                        fraction of B is spent along a bearing it still
                                        approaches (:meth:`~fov_marl.pipeline.
@@ -433,6 +441,9 @@ class ControllerParams:
             credit moving away from a bearing builds towards it (Section 2e); 0: none.
         blind_travel_reach: with the budget per bearing, clear it while no
             neighbour's reachable disk comes near the robot (Section 2f).
+        blind_travel_prespend: with the budget per bearing, a bearing whose last look
+            showed a neighbour within D_s starts with the part of the budget the pair
+            has already used (Section 2g).
         walls: add the arena walls as rows.
         wall_gain: γ_w (1/s) of the wall rows, (0, 1e3]; used as ``min(γ_w, 1/dt)``.
         deadlock_turn_deg: turn of u*'s translation (degrees, to the right) tried when
@@ -549,6 +560,7 @@ class ControllerParams:
     blind_travel_bearings: int = 0
     blind_travel_credit_m: float = 0.0
     blind_travel_reach: bool = False
+    blind_travel_prespend: bool = False
     lost_sigma_max_m: float = math.inf
     undetected_quantile: str = "gaussian"
     bearing_cone_max_deg: float = 45.0
@@ -628,6 +640,7 @@ class ControllerParams:
             "detection_cone",
             "detection_sector",
             "blind_travel_reach",
+            "blind_travel_prespend",
         ):
             _check_bool(name, getattr(self, name))
         _check("fov_margin_m", self.fov_margin_m, 0.0, 1.0)

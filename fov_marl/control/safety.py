@@ -478,6 +478,34 @@ all 20 above 0.99, 135 s), and it rests on the
 bins' caveat of Section 2e (a neighbour moving sideways into a bearing cleared while it
 stood elsewhere meets a fresh budget there), which this rule does not.
 
+2g. A bearing that saw a neighbour near starts spent (option)
+------------------------------------------------------------
+
+The budget's bound, ``d_0 − d_1 ≤ n_0 · Δ_i + (−n_0) · Δ_j ≤ 2 B``, keeps a pair apart
+only if it started at least ``D_s − 2 B`` (contact, 1 m) plus ``2 B`` apart, i.e. at
+``D_s``: a bearing reset while the camera showed a neighbour *inside* D_s there gets a
+fresh budget B it cannot afford. Measured (the harsh changed env of Section 1e,
+``head_on`` seed 81100, two robots packed 1.165 m apart along a wall): robot 0 saw
+robot 1 behind its left shoulder for 27 steps, turned away, and 96 s later backed 0.42 m
+in one 0.4 s step into it (1.13 m to 0.714 m); the bearing's budget was unspent
+(``c = 0.009``), the belief spread over the arena, and no particle lay behind within
+1.6 m. With ``ControllerParams.blind_travel_prespend`` (on in the safety filter; off in
+``ControllerParams`` and so in pfcbf, whose sweeps were measured without it) each bearing
+keeps, besides ``c_k``, the part of its budget the neighbours seen there at its last
+look had already used (:func:`bearing_travel_floor`)::
+
+    f_k = max_j  clip((D_s − d_j) / 2, 0, B)     over the j whose cone holds bearing k,
+    d_j = ‖ⁱz_j‖ − r_j,   r_j = z_δ σ_max,   cone: |ψ_k − ψ_j| ≤ asin(min(1, r_j / ‖ⁱz_j‖)) + π / K
+
+(the camera's report ``ⁱz_j`` with the chance margin of Section 1d, σ_max the larger
+std of Σ_MEAS; the known start poses with ``r_j = 0``; every bearing when
+``‖ⁱz_j‖ ≤ r_j``), and the rows and the look before the leap use ``c_k + f_k`` for the
+bearings out of view. The pair then closes by at most ``2 (B − f) ≤ 2 B − (D_s − d_0)``
+from ``d_0``, to ``D_s − 2 B`` as from D_s. ``f_k`` is set for the bearings in view
+every step (and raised, never lowered, for those out of view that a detection's cone
+reaches); the bearings in view get no row from it, so it changes nothing while the
+robot looks.
+
 3. Walls
 ========
 
@@ -540,6 +568,7 @@ __all__ = [
     "bearing_travel_reset",
     "bearings_in_view",
     "bearing_travel_rows",
+    "bearing_travel_floor",
     "reach_clear",
     "hold_band",
     "neighbour_row_offsets",
@@ -1289,6 +1318,48 @@ def bearing_travel_rows(
     A[..., 1] = -np.sin(ang)
     b = np.where(on, np.maximum(0.0, left / dt_s), np.inf)
     return A, b, np.where(on, left, np.inf)
+
+
+def bearing_travel_floor(
+    near_body: np.ndarray,
+    slack_m: np.ndarray,
+    yaw_rad: np.ndarray,
+    k: int,
+    safety_distance_m: float,
+    budget_m: float,
+) -> np.ndarray:
+    """The part of each bearing's budget the neighbours seen now have used (Section 2g).
+
+    Args:
+        near_body: ``(R, M, 2)`` where the neighbours are reported now in Σ_i (m): the
+            camera's detections, or the known start poses; NaN: none.
+        slack_m: ``(R, M)`` (or broadcastable) how much nearer than reported each may be
+            (m): ``z_δ σ_max`` for a detection, 0 for a known pose.
+        yaw_rad: ``(R,)`` the robots' yaw. k: K_b, the world bearings of the budget.
+        safety_distance_m: D_s. budget_m: B.
+
+    Returns:
+        ``(R, K)`` ``f_k = max_j clip((D_s − d_j) / 2, 0, B)`` over the neighbours whose
+        cone of bearings, widened by half a bin, holds bearing k (0 where none does).
+    """
+    p = np.asarray(near_body, dtype=np.float64)
+    R, M = p.shape[:2]
+    slack = np.broadcast_to(np.asarray(slack_m, dtype=np.float64), (R, M))
+    dist = np.hypot(p[..., 0], p[..., 1])
+    on = np.isfinite(dist)
+    dist = np.where(on, dist, np.inf)
+    used = np.clip(0.5 * (safety_distance_m - (dist - slack)), 0.0, budget_m)
+    used = np.where(on, used, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(dist > slack, slack / np.where(on, dist, 1.0), 2.0)
+    cone = np.where(ratio <= 1.0, np.arcsin(np.minimum(ratio, 1.0)), math.pi) + math.pi / k
+    psi = np.arctan2(np.where(on, p[..., 1], 0.0), np.where(on, p[..., 0], 1.0))  # (R, M)
+    ang = bearing_angles_body(k, yaw_rad)  # (R, K)
+    off = np.abs((ang[:, None, :] - psi[..., None] + math.pi) % (2.0 * math.pi) - math.pi)
+    hit = off <= cone[..., None] + 1e-9
+    if M == 0:
+        return np.zeros((R, k))
+    return np.max(np.where(hit, used[..., None], 0.0), axis=1)
 
 
 def reach_clear(centre_body: np.ndarray, radius_m: np.ndarray, horizon_m: float) -> np.ndarray:

@@ -182,7 +182,17 @@ the default 2000 particles; with 500 (``tracker_params={"n_particles_total": 500
 collided in envs with 0.71 m detection noise, a 4 m camera, ``v_max_mps = 2`` or
 ``dt_s = 0.4`` (none of them at 2000 particles). The rows on the camera's report and
 the disk release of last-seen points keep all five clear (their sweeps rerun, 648
-episodes, 0 collisions; CHANGELOG).
+episodes, 0 collisions; CHANGELOG). With all four changes at once (0.8 m a step, 0.71 m
+noise) two robots packed 1.1 m apart collided at 2000 particles too, in 4 of 18
+episodes of a 324-episode sweep: one robot had seen its neighbour 1.165 m behind its
+shoulder, turned away, and 96 s later backed blind into it on the bearing's unspent
+0.5 m budget, which bounds a pair's closing by 2 B and so keeps out of contact only
+robots that start at least D_s apart. A bearing the camera saw a neighbour at inside
+D_s therefore starts spent by what the pair has already closed
+(``blind_travel_prespend``, safety Section 2g); the sweep reruns clean. The other
+mechanism there, a report outside the camera sector, is mended only by the option
+``detection_sector`` (Section 1e), off: it costs the learned policy behind the filter
+(CHANGELOG).
 
 The particle filters start from the true start poses (the paper's assumption,
 VII-B) read from ``env.unwrapped.poses`` at reset; pass ``init="uniform"`` to avoid
@@ -239,6 +249,7 @@ FILTER_CONTROLLER_DEFAULTS: dict[str, Any] = {
     "blind_travel_m": 0.5,
     "blind_travel_bearings": 24,
     "blind_travel_memory_s": math.inf,
+    "blind_travel_prespend": True,
     "look_yields_fov": True,
     "look_persistence_deg": 45.0,
     "lost_fov_yield": False,

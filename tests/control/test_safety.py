@@ -23,6 +23,7 @@ from fov_marl.control.safety import (
     arc_yaw_guard,
     barrier_gain,
     bearing_cone,
+    bearing_travel_floor,
     blind_representatives,
     detection_sector_rows,
     hold_band,
@@ -1496,3 +1497,80 @@ def test_detection_sector_rows_keep_a_packed_robot_out_of_the_sector():
     with_opt = _rows(detection_body=inside, detection_sector=True, **kw)
     for a, c in zip(same.robot(0), with_opt.robot(0), strict=True):
         np.testing.assert_array_equal(a, c)
+
+
+def _bearing_travel_floor_reference(near, slack, yaw, k, d_s, budget):
+    """Section 2g one neighbour and one bearing at a time."""
+    R, M = near.shape[:2]
+    out = np.zeros((R, k))
+    for r in range(R):
+        for j in range(M):
+            x, y = near[r, j]
+            if not (math.isfinite(x) and math.isfinite(y)):
+                continue
+            d = math.hypot(x, y)
+            used = min(max(0.5 * (d_s - (d - slack[r, j])), 0.0), budget)
+            cone = math.asin(slack[r, j] / d) if d > slack[r, j] else math.pi
+            cone += math.pi / k
+            for b in range(k):
+                ang = 2.0 * math.pi * b / k - yaw[r]
+                off = abs((ang - math.atan2(y, x) + math.pi) % (2.0 * math.pi) - math.pi)
+                if off <= cone + 1e-9:
+                    out[r, b] = max(out[r, b], used)
+    return out
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.sampled_from([4, 12, 24, 36]), st.integers(0, 4))
+def test_bearing_travel_floor_matches_its_loop_reference(seed, k, m):
+    rng = np.random.default_rng(seed)
+    near = rng.uniform(-4.0, 4.0, size=(3, m, 2))
+    near[rng.random((3, m)) < 0.3] = np.nan
+    slack = rng.choice([0.0, 0.3, 0.75, 5.0], size=(3, m))
+    yaw = rng.uniform(-math.pi, math.pi, 3)
+    got = bearing_travel_floor(near, slack, yaw, k, 2.0, 0.5)
+    assert got.shape == (3, k)
+    np.testing.assert_allclose(got, _bearing_travel_floor_reference(near, slack, yaw, k, 2.0, 0.5))
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    st.floats(-3.5, 3.5),
+    st.floats(-3.5, 3.5),
+    st.floats(0.0, 1.7),
+    st.floats(-math.pi, math.pi),
+    st.sampled_from([12, 24]),
+    st.integers(0, 10_000),
+)
+def test_bearing_travel_floor_covers_every_position_the_report_allows(zx, zy, slack, yaw, k, seed):
+    """Section 2g's guarantee: for every position ``p`` within ``slack`` of the report, the
+    bearing nearest to p's (the bin whose row bounds the approach towards p) keeps at least
+    ``clip((D_s − ‖p‖) / 2, 0, B)``, so the pair's blind closing from ``‖p‖`` stays within
+    ``2 B − (D_s − ‖p‖)`` (to ``D_s − 2 B`` as from D_s)."""
+    assume(math.hypot(zx, zy) > 1e-3)
+    f = bearing_travel_floor(np.array([[[zx, zy]]]), slack, np.array([yaw]), k, 2.0, 0.5)[0]
+    rng = np.random.default_rng(seed)
+    r = slack * np.sqrt(rng.random(200))
+    th = rng.uniform(-math.pi, math.pi, 200)
+    p = np.array([zx, zy]) + np.stack([r * np.cos(th), r * np.sin(th)], -1)
+    d = np.hypot(p[:, 0], p[:, 1])
+    psi_world = np.arctan2(p[:, 1], p[:, 0]) + yaw
+    nearest = np.round(psi_world / (2.0 * math.pi / k)).astype(int) % k
+    need = np.clip(0.5 * (2.0 - d), 0.0, 0.5)
+    assert np.all(f[nearest] >= need - 1e-9)
+
+
+def test_bearing_travel_floor_is_zero_beyond_d_s_and_spends_all_of_a_packed_bearing():
+    """A neighbour whose whole noise disk lies beyond D_s has used nothing; one reported
+    1.1 m away with the default noise margin (z_δ σ = 0.74 m) has used all of B, within its
+    cone of bearings (asin(0.74 / 1.1) = 42°, plus half a bin) and nowhere else."""
+    slack = risk_quantile(0.01) * math.sqrt(0.1)
+    far = bearing_travel_floor(
+        np.array([[[0.0, 2.0 + slack + 0.01]]]), slack, np.zeros(1), 24, 2.0, 0.5
+    )
+    assert np.all(far == 0.0)
+    f = bearing_travel_floor(np.array([[[-1.1, 0.0]]]), slack, np.zeros(1), 24, 2.0, 0.5)[0]
+    ang = np.degrees(2.0 * math.pi * np.arange(24) / 24)
+    behind = np.abs(((ang - 180.0) + 180.0) % 360.0 - 180.0)
+    half = math.degrees(math.asin(slack / 1.1)) + 7.5
+    np.testing.assert_array_equal(f, np.where(behind <= half + 1e-6, 0.5, 0.0))

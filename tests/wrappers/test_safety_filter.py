@@ -200,6 +200,41 @@ def test_uniform_init_counts_every_unseen_bearing_as_spent():
     assert np.all(known.pipeline._bearing_travel == 0.0)
 
 
+def test_a_packed_neighbour_behind_spends_its_bearings_until_the_robot_looks():
+    """Section 2g (``blind_travel_prespend``): robot 0 starts 1.1 m in front of robot 1,
+    facing away. The known start pose (exact) has used ``(D_s − 1.1) / 2 = 0.45`` m of the
+    0.5 m budget at the bearing behind it (the pair may close only to D_s − 2 B, as from
+    D_s), so robot 0 may back up blind 0.05 m; without the option the unspent budget lets
+    it back 0.5 m. Once the robot has turned and looked, the bearing is set from what the
+    camera shows: ~1.1 m with the noise's margin (0.74 m), all of B."""
+    from fov_marl.control.safety import bearing_angles_body
+
+    poses = np.array([[20.0, 20.0, 0.0], [18.9, 20.0, 0.0], [5.0, 5.0, 0.0]])
+    spent = {}
+    for pre in (False, True):
+        env = SafetyFilterWrapper(
+            fov_coverage_v0.parallel_env(n_agents=3, initial_poses=poses, fov_deg=120.0),
+            controller_params={"blind_travel_prespend": pre},
+        )
+        env.reset(seed=0)
+        pipe = env.pipeline
+        K = pipe._bearing_travel.shape[1]
+        behind = int(np.argmin(np.abs(bearing_angles_body(K, np.array([math.pi]))[0])))
+        spent[pre] = pipe._bearing_spent()[0, behind]
+    B = env.pipeline.controller_params.blind_travel_m
+    assert spent[False] == 0.0 and spent[True] == pytest.approx(0.5 * (2.0 - 1.1))
+    # robot 0 turns around at ω_max, standing, until it has the neighbour in view
+    stand = np.zeros(3, np.float32)
+    for _ in range(15):
+        env.step({"robot_0": np.array([0, 0, 1], np.float32), "robot_1": stand, "robot_2": stand})
+        yaw = env.unwrapped.poses[0, 2]
+        if abs(math.remainder(yaw - math.pi, 2 * math.pi)) < 0.2:
+            break
+    f = env.pipeline._bearing_floor[0, behind]
+    # seen now, ~1.1 m away: its bearing's floor is set by the detection, not released
+    assert f == B and env.pipeline._bearing_spent()[0, behind] == 0.0  # in view: no row
+
+
 @pytest.mark.parametrize(
     "adversary, n, start, env_kw, tracker",
     [
