@@ -504,7 +504,13 @@ bearings out of view. The pair then closes by at most ``2 (B − f) ≤ 2 B − 
 from ``d_0``, to ``D_s − 2 B`` as from D_s. ``f_k`` is set for the bearings in view
 every step (and raised, never lowered, for those out of view that a detection's cone
 reaches); the bearings in view get no row from it, so it changes nothing while the
-robot looks.
+robot looks (nor ever with a 360° camera). Measured with it (the filter, 2000 particles): that episode and the
+other three collisions of the harsh sweep keep their 1.1 m spacing, and the whole sweep
+(324 episodes) reruns with 0 collisions, as does the same sweep on new seeds; red team 9's packed 45° pair (Section 2c) keeps
+clear even with its last-seen point released. In the default env, N = 6, β = 120°, seeds
+0-19: pfcbf behind the filter 0.9954 final η and 9.50 s to the normalised threshold
+(0.9954, 9.49 s without), the shipped learned policy 0.9963 and 15.72 s (0.9968,
+15.67 s); random actions are changed as often (60.9%).
 
 3. Walls
 ========
