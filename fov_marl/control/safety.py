@@ -478,14 +478,14 @@ all 20 above 0.99, 135 s), and it rests on the
 bins' caveat of Section 2e (a neighbour moving sideways into a bearing cleared while it
 stood elsewhere meets a fresh budget there), which this rule does not.
 
-2g. A bearing that saw a neighbour near starts spent (option)
-------------------------------------------------------------
+2g. A bearing that saw a neighbour inside D_s starts spent
+----------------------------------------------------------
 
 The budget's bound, ``d_0 − d_1 ≤ n_0 · Δ_i + (−n_0) · Δ_j ≤ 2 B``, keeps a pair apart
 only if it started at least ``D_s − 2 B`` (contact, 1 m) plus ``2 B`` apart, i.e. at
 ``D_s``: a bearing reset while the camera showed a neighbour *inside* D_s there gets a
 fresh budget B it cannot afford. Measured (the harsh changed env of Section 1e,
-``head_on`` seed 81100, two robots packed 1.165 m apart along a wall): robot 0 saw
+``head_on`` seed 81100, two robots packed along a wall, 1.165 m apart): robot 0 saw
 robot 1 behind its left shoulder for 27 steps, turned away, and 96 s later backed 0.42 m
 in one 0.4 s step into it (1.13 m to 0.714 m); the bearing's budget was unspent
 (``c = 0.009``), the belief spread over the arena, and no particle lay behind within
@@ -504,10 +504,11 @@ bearings out of view. The pair then closes by at most ``2 (B − f) ≤ 2 B − 
 from ``d_0``, to ``D_s − 2 B`` as from D_s. ``f_k`` is set for the bearings in view
 every step (and raised, never lowered, for those out of view that a detection's cone
 reaches); the bearings in view get no row from it, so it changes nothing while the
-robot looks (nor ever with a 360° camera). Measured with it (the filter, 2000 particles): that episode and the
-other three collisions of the harsh sweep keep their 1.1 m spacing, and the whole sweep
-(324 episodes) reruns with 0 collisions, as does the same sweep on new seeds; red team 9's packed 45° pair (Section 2c) keeps
-clear even with its last-seen point released. In the default env, N = 6, β = 120°, seeds
+robot looks (nor ever with a 360° camera). Measured with it (the filter, 2000
+particles): that episode and the other three collisions of the harsh sweep keep their
+1.1 m spacing, and the whole sweep (324 episodes) reruns with 0 collisions, as does the
+same sweep on new seeds; red team 9's packed 45° pair (Section 2c) keeps clear even
+with its last-seen point released. In the default env, N = 6, β = 120°, seeds
 0-19: pfcbf behind the filter 0.9954 final η and 9.50 s to the normalised threshold
 (0.9954, 9.49 s without), the shipped learned policy 0.9963 and 15.72 s (0.9968,
 15.67 s); random actions are changed as often (60.9%).
