@@ -305,7 +305,10 @@ def filter_controller_defaults(config: Any, overrides: Any = None) -> dict[str, 
     13.7 s), 20 of 20.
     Narrow views stay costly. pfcbf behind the filter, η after 30 s, seeds 0 / 7 / 9, with
     the steady-course look (``look_persistence_deg = 45``, the default): 0.777 / 0.013 /
-    0.084 at 45°, 0.991 / 0.766 / 0.981 at 90°. Before it, with the option
+    0.084 at 45°, 0.991 / 0.766 / 0.981 at 90°; on this release's filter
+    (``run_episode("coverage", "pfcbf", seed, safety_filter=True, fov_deg=β,
+    max_steps=150)``) 0.730 / 0.011 / 0.084 and 0.991 / 0.614 / 0.976, the same at 45°
+    seed 0 and 90° seed 7 with ``blind_travel_prespend`` off. Before it, with the option
     ``blind_travel_reach`` (safety Section 2f; without it in brackets): at 45° 0.904 /
     0.012 / 0.293 (0.818 / 0.011 / 0.084), at 90° 0.977 / 0.577 / 0.943 (0.991 / 0.549 /
     0.876). An earlier record, on an older filter: 0.98 / 0.41 / 0.99
