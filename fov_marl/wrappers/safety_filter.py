@@ -308,7 +308,8 @@ def filter_controller_defaults(config: Any, overrides: Any = None) -> dict[str, 
     0.084 at 45°, 0.991 / 0.766 / 0.981 at 90°; on this release's filter
     (``run_episode("coverage", "pfcbf", seed, safety_filter=True, fov_deg=β,
     max_steps=150)``) 0.730 / 0.011 / 0.084 and 0.991 / 0.614 / 0.976, the same at 45°
-    seed 0 and 90° seed 7 with ``blind_travel_prespend`` off. Before it, with the option
+    seed 0 and 90° seed 7 with ``blind_travel_prespend`` off. Before the steady-course
+    look, with the option
     ``blind_travel_reach`` (safety Section 2f; without it in brackets): at 45° 0.904 /
     0.012 / 0.293 (0.818 / 0.011 / 0.084), at 90° 0.977 / 0.577 / 0.943 (0.991 / 0.549 /
     0.876). An earlier record, on an older filter: 0.98 / 0.41 / 0.99
