@@ -268,6 +268,15 @@ class PfCbfPipeline:
         )
         self._reach_world = np.full((R, m, 2), np.nan)
         self._reach_base_m = np.zeros((R, m))
+        #: Section 2g's floors are kept (and read) only with a budget per bearing, the
+        #: tracker and a camera with bearings out of view
+        self._prespend_on = bool(
+            par.blind_travel_prespend
+            and par.blind_travel_bearings > 0
+            and par.blind_travel_m > 0
+            and self.estimates == "tracker"
+            and self.config.fov_rad < 2.0 * math.pi
+        )
         self.counters = {"interventions": 0, "fallbacks": 0, "safety_fallbacks": 0}
 
     # ------------------------------------------------------------------ views
@@ -421,26 +430,28 @@ class PfCbfPipeline:
             math.pi / max(K, 1),
         )
 
-    def _prespend_on(self) -> bool:
-        par = self.controller_params
-        return bool(
-            par.blind_travel_prespend
-            and par.blind_travel_bearings > 0
-            and par.blind_travel_m > 0
-            and self.estimates == "tracker"
-            and self.config.fov_rad < 2.0 * math.pi
-        )
+    def _start_world(self, rows: np.ndarray, init: Any) -> np.ndarray:
+        """``(len(rows), N − 1, 2)`` the neighbours' known start positions in Σ_w, from
+        ``init (B, N, 3)``, in each row's slot order."""
+        copy = rows // self.n
+        return np.asarray(init, dtype=np.float64)[copy[:, None], self._ids[rows], :2]
+
+    def _bearings_seen(self, rows: np.ndarray | slice) -> np.ndarray:
+        """``(R, K)`` the budget bearings each of ``rows`` has in view now (the test of
+        :func:`~fov_marl.control.safety.bearing_travel_reset`, without its 360° case)."""
+        K = self._bearing_travel.shape[1]
+        ang = bearing_angles_body(K, self._own_pose[rows, 2])
+        return bearings_in_view(ang, self.config.fov_rad, math.pi / K)
 
     def _reset_bearing_floor(self, rows: np.ndarray, init: np.ndarray | None) -> None:
         """Start the floors of ``rows`` (safety Section 2g): the known start poses ``init
         (B, N, 3)`` are exact reports at t = 0, seen from every bearing; then this step's
         detections."""
         self._bearing_floor[rows] = 0.0
-        if not self._prespend_on():
+        if not self._prespend_on:
             return
         if init is not None:
-            copy = rows // self.n
-            start_world = np.asarray(init, dtype=np.float64)[copy[:, None], self._ids[rows], :2]
+            start_world = self._start_world(rows, init)
             start_body = world_to_body(start_world, self._own_pose[rows][:, None, :])
             par, cfg = self.controller_params, self.config
             self._bearing_floor[rows] = bearing_travel_floor(
@@ -456,16 +467,19 @@ class PfCbfPipeline:
     def _update_bearing_floor(self, rows: np.ndarray) -> None:
         """Set the floors of the bearings ``rows`` have in view from this step's detections,
         and raise those out of view that a detection's cone reaches (Section 2g)."""
-        if not self._prespend_on():
+        if not self._prespend_on:
             return
         par, cfg = self.controller_params, self.config
-        K = self._bearing_floor.shape[1]
-        yaw = self._own_pose[rows, 2]
         slack = risk_quantile(par.safety_risk) * math.sqrt(max(cfg.meas_cov_diag[:2]))
         used = bearing_travel_floor(
-            self._detection_body[rows], slack, yaw, K, cfg.safety_distance_m, par.blind_travel_m
+            self._detection_body[rows],
+            slack,
+            self._own_pose[rows, 2],
+            self._bearing_floor.shape[1],
+            cfg.safety_distance_m,
+            par.blind_travel_m,
         )
-        seen = bearings_in_view(bearing_angles_body(K, yaw), cfg.fov_rad, math.pi / K)
+        seen = self._bearings_seen(rows)
         self._bearing_floor[rows] = np.where(
             seen, used, np.maximum(self._bearing_floor[rows], used)
         )
@@ -474,23 +488,16 @@ class PfCbfPipeline:
         """``(B N, K)`` the budget spent per bearing: ``c_k``, plus its floor (Section 2g)
         for the bearings out of view (those in view get no row from it)."""
         c = self._bearing_travel
-        if not self._prespend_on():
+        if not self._prespend_on:
             return c
-        K = c.shape[1]
-        seen = bearings_in_view(
-            bearing_angles_body(K, self._own_pose[:, 2]), self.config.fov_rad, math.pi / K
-        )
-        return c + np.where(seen, 0.0, self._bearing_floor)
+        return c + np.where(self._bearings_seen(slice(None)), 0.0, self._bearing_floor)
 
     def _reset_last_seen(self, rows: np.ndarray, init: np.ndarray | None) -> None:
         """Forget the last-seen points of ``rows``; the known start poses ``init (B, N, 3)``
         count as seen at t = 0. Then take this step's detections."""
         self._last_seen_world[rows] = np.nan
         if init is not None:
-            copy = rows // self.n
-            self._last_seen_world[rows] = np.asarray(init, dtype=np.float64)[
-                copy[:, None], self._ids[rows], :2
-            ]
+            self._last_seen_world[rows] = self._start_world(rows, init)
         self._update_last_seen()
 
     def _update_last_seen(self) -> None:
@@ -507,10 +514,7 @@ class PfCbfPipeline:
         self._reach_world[rows] = np.nan
         self._reach_base_m[rows] = 0.0
         if init is not None:
-            copy = rows // self.n
-            self._reach_world[rows] = np.asarray(init, dtype=np.float64)[
-                copy[:, None], self._ids[rows], :2
-            ]
+            self._reach_world[rows] = self._start_world(rows, init)
         self._take_reach_detections(rows)
         self._clear_reached(rows)
 

@@ -540,7 +540,7 @@ from scipy.special import ndtri
 
 from fov_marl.config import ScenarioConfig
 from fov_marl.control.params import ControllerParams
-from fov_marl.geometry import body_to_world, in_fov, integrate_unicycle
+from fov_marl.geometry import body_to_world, in_fov, integrate_unicycle, wrap_angle
 from fov_marl.infos import SAFETY_CAUSES
 from fov_marl.validation import describe
 
@@ -1351,21 +1351,17 @@ def bearing_travel_floor(
     """
     p = np.asarray(near_body, dtype=np.float64)
     R, M = p.shape[:2]
+    if M == 0:
+        return np.zeros((R, k))
     slack = np.broadcast_to(np.asarray(slack_m, dtype=np.float64), (R, M))
     dist = np.hypot(p[..., 0], p[..., 1])
     on = np.isfinite(dist)
-    dist = np.where(on, dist, np.inf)
-    used = np.clip(0.5 * (safety_distance_m - (dist - slack)), 0.0, budget_m)
-    used = np.where(on, used, 0.0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        ratio = np.where(dist > slack, slack / np.where(on, dist, 1.0), 2.0)
-    cone = np.where(ratio <= 1.0, np.arcsin(np.minimum(ratio, 1.0)), math.pi) + math.pi / k
-    psi = np.arctan2(np.where(on, p[..., 1], 0.0), np.where(on, p[..., 0], 1.0))  # (R, M)
-    ang = bearing_angles_body(k, yaw_rad)  # (R, K)
-    off = np.abs((ang[:, None, :] - psi[..., None] + math.pi) % (2.0 * math.pi) - math.pi)
-    hit = off <= cone[..., None] + 1e-9
-    if M == 0:
-        return np.zeros((R, k))
+    used = np.where(on, np.clip(0.5 * (safety_distance_m - (dist - slack)), 0.0, budget_m), 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):  # NaN rows: used = 0 above
+        half = np.where(dist > slack, np.arcsin(np.clip(slack / dist, 0.0, 1.0)), math.pi)
+    psi = np.arctan2(p[..., 1], p[..., 0])  # (R, M), NaN where none
+    off = np.abs(wrap_angle(bearing_angles_body(k, yaw_rad)[:, None, :] - psi[..., None]))
+    hit = off <= half[..., None] + math.pi / k + 1e-9  # False where psi is NaN
     return np.max(np.where(hit, used[..., None], 0.0), axis=1)
 
 
