@@ -671,7 +671,8 @@ class BatchedFovCbfController:
         p = self.params
         return safe_fallback_inputs(
             u_qp, A, b, kind, keep, p.look_gain, self.config.omega_max_radps,
-            p.fallback_tie_mps, p.fallback_straight,
+            p.fallback_tie_mps, p.fallback_straight, p.fallback_escape, self.config.v_max_mps,
+            p.n_polygon,
         )  # fmt: skip
 
     def _solve_loop(

@@ -107,6 +107,8 @@ __all__ = [
     "FovCbfController",
     "approaches_held_row",
     "hold_cleanup",
+    "escape_heading",
+    "escape_translation",
     "safe_fallback_inputs",
 ]
 
@@ -185,6 +187,78 @@ def hold_cleanup(
     return out
 
 
+#: directions (evenly spaced) the escaping fallback tries as its turn target
+_ESCAPE_DIRECTIONS = 72
+#: the escaping fallback keeps a translation of at least this fraction of v_max
+_ESCAPE_MIN_FRACTION = 1e-3
+
+
+def escape_translation(
+    v: np.ndarray, A: np.ndarray, b: np.ndarray, v_max: float, n_polygon: int
+) -> np.ndarray | None:
+    """The translation nearest ``v`` that makes no collision row worse than standing still.
+
+    Projects ``v`` onto ``{w : Ã w ≥ min(−b̃, 0)} ∩ polygon`` (the rows that hold at
+    standstill stay met, those that do not are not approached) by one least-distance
+    program (:func:`~fov_marl.control.qp.least_distance`). ``w = 0`` is always in the
+    set, so only numerical trouble returns None.
+
+    Args:
+        v: ``(2,)`` the translation to keep as much of as possible (m/s).
+        A, b: ``(K, 3)``, ``(K,)`` normalised collision rows (their ω column unused).
+        v_max, n_polygon: the admissible polygon (:mod:`~fov_marl.control.qp`).
+
+    Returns:
+        ``(2,)`` the translation, or None.
+    """
+    from fov_marl.control.qp import least_distance, polygon_normals
+
+    Av = A[:, :2]
+    lo = np.minimum(-b, 0.0)
+    nrm = polygon_normals(n_polygon)
+    apothem = v_max * math.cos(math.pi / n_polygon)
+    G = np.concatenate([Av, -nrm])
+    h = np.concatenate([lo - Av @ v, -apothem + nrm @ v])
+    y = least_distance(G, h)
+    if y is None:
+        return None
+    w = v + y
+    if (Av @ w - lo).min(initial=0.0) < -1e-12 or (nrm @ w).max() > apothem + 1e-12:
+        return None
+    return w
+
+
+def escape_heading(
+    v: np.ndarray, A: np.ndarray, b: np.ndarray, kind: np.ndarray, keep: np.ndarray
+) -> np.ndarray:
+    """``(F,)`` bearing (rad, Σ_i) of the escape direction nearest ``v``, NaN for none.
+
+    A direction qualifies when the rows the camera cannot clear (neighbour, cone and
+    wall rows) let a step along it be no worse than standing still
+    (``Ã d ≥ min(−b̃, 0)``); the blind rows (particles, density, last-seen points,
+    travel budget) are not asked: they lapse for the bearings the camera looks at.
+    ``v`` of zero length aims at the camera's axis.
+
+    Args:
+        v: ``(F, 2)`` the wanted translations. A, b, kind, keep: ``(F, K, 3)``,
+            ``(F, K)``, ``(F, K)``, ``(F, K)`` the normalised collision rows.
+    """
+    from fov_marl.control.safety import ROW_CONE, ROW_NEIGHBOUR, ROW_WALL
+
+    ang = np.linspace(-math.pi, math.pi, _ESCAPE_DIRECTIONS, endpoint=False)
+    d = np.stack([np.cos(ang), np.sin(ang)], axis=-1)  # (D, 2)
+    hard = keep & ((kind == ROW_NEIGHBOUR) | (kind == ROW_CONE) | (kind == ROW_WALL))
+    lo = np.where(hard, np.minimum(-b, 0.0), -np.inf)  # (F, K)
+    val = np.einsum("dn,fkn->fdk", d, A[..., :2])  # direction·row at unit speed
+    # homogeneous in the step's length where lo = 0; the rows met at rest (lo < 0) are
+    # asked at 10% of unit speed, the first step's scale
+    ok = (np.where(hard[:, None, :], 0.1 * val, np.inf) >= lo[:, None, :] - 1e-12).all(axis=2)
+    target = np.where(np.hypot(v[:, 0], v[:, 1]) > 0.0, np.arctan2(v[:, 1], v[:, 0]), 0.0)
+    off = np.abs(np.angle(np.exp(1j * (ang[None, :] - target[:, None]))))
+    best = np.argmin(np.where(ok, off, np.inf), axis=1)
+    return np.where(ok.any(axis=1), ang[best], np.nan)
+
+
 def safe_fallback_inputs(
     u_qp: np.ndarray,
     A: np.ndarray,
@@ -195,6 +269,9 @@ def safe_fallback_inputs(
     omega_max_radps: float,
     tie_mps: float = 0.25,
     straight: bool = True,
+    escape: bool = False,
+    v_max_mps: float = 1.0,
+    n_polygon: int = 16,
 ) -> np.ndarray:
     """The safe fallback of :meth:`FovCbfController._safe_fallback` for ``F`` robots.
 
@@ -206,6 +283,11 @@ def safe_fallback_inputs(
         tie_mps: rows within this of the smallest ``b̃`` tie as the turn target
             (``ControllerParams.fallback_tie_mps``); straight: drop ω of a kept step
             while a row holds or retreats (``fallback_straight``).
+        escape: ``ControllerParams.fallback_escape``: a ``u_qp`` that makes a row
+            worse is projected (:func:`escape_translation`) instead of dropped, and a
+            robot left without translation turns towards the escape direction nearest
+            ``u_qp``'s (:func:`escape_heading`) instead of the most dangerous row.
+        v_max_mps, n_polygon: the admissible polygon (with ``escape``).
 
     Returns:
         ``(F, 3)`` body-frame inputs ``[vx, vy, ω]``.
@@ -217,16 +299,30 @@ def safe_fallback_inputs(
     okm = np.where(keep, val >= np.minimum(b, 0.0) - tol, True).all(axis=1) & has
     out = np.zeros((u_qp.shape[0], 3))
     out[okm] = uq[okm]
+    moved = okm.copy()
+    if escape:
+        for f in np.flatnonzero(~okm & has):  # rare: robot by robot, as hold_cleanup
+            k = keep[f]
+            w = escape_translation(uq[f, :2], A[f, k], b[f, k], v_max_mps, n_polygon)
+            if w is not None and math.hypot(w[0], w[1]) > _ESCAPE_MIN_FRACTION * v_max_mps:
+                out[f, :2], out[f, 2] = w, uq[f, 2]
+                moved[f] = True
     if straight:  # a held or retreating row: a straight step, no arc
-        out[okm & (keep & (b <= tol)).any(axis=1), 2] = 0.0
+        out[moved & (keep & (b <= tol)).any(axis=1), 2] = 0.0
     nw = keep & (kind != ROW_WALL) & (kind != ROW_CONE)
-    anyw = nw.any(axis=1) & ~okm
+    anyw = nw.any(axis=1) & ~moved
+    gain = look_gain if look_gain > 0 else 3.0
+    if escape and (~moved).any():
+        stuck = np.flatnonzero(~moved)
+        phi = escape_heading(uq[stuck, :2], A[stuck], b[stuck], kind[stuck], keep[stuck])
+        found = np.isfinite(phi)
+        out[stuck[found], 2] = np.clip(gain * phi[found], -omega_max_radps, omega_max_radps)
+        anyw[stuck[found]] = False
     if anyw.any():
         bb = np.where(nw, b, np.inf)
         phi = np.arctan2(-A[..., 1], -A[..., 0])
         near = nw & (bb <= bb.min(axis=1, keepdims=True) + tie_mps)
         k = np.argmin(np.where(near, np.abs(phi), np.inf), axis=1)
-        gain = look_gain if look_gain > 0 else 3.0
         om = np.clip(gain * phi[np.arange(u_qp.shape[0]), k], -omega_max_radps, omega_max_radps)
         out[anyw, 2] = om[anyw]
     return out
@@ -660,7 +756,8 @@ class FovCbfController:
         p = self.params
         return safe_fallback_inputs(
             u, A[None], b[None], kind[None], keep, p.look_gain, self.config.omega_max_radps,
-            p.fallback_tie_mps, p.fallback_straight,
+            p.fallback_tie_mps, p.fallback_straight, p.fallback_escape, self.config.v_max_mps,
+            p.n_polygon,
         )[0]  # fmt: skip
 
     def solve(

@@ -211,6 +211,20 @@ field                        default   source / reason
 ``fallback_straight``        True      a step the safe fallback keeps while a row holds
                                        or retreats has ω = 0 (an arc at ω_max curved a
                                        packed robot from 1.1 m to 1.089 m)
+``fallback_escape``          False     the safe fallback projects the QP's input onto
+                                       "no row worse than standing still" instead of
+                                       stopping when it makes a row worse, and a robot
+                                       left without translation turns towards the
+                                       escape direction nearest it that its neighbour,
+                                       cone and wall rows allow, so that the camera
+                                       clears the blind rows there (:mod:`~fov_marl.
+                                       control.safety` Section 1f). Measured: robots
+                                       packed 1.1 m apart in a corner never moved
+``safety_recovery_mps``      inf       below D_s a neighbour row demands retreat at
+                                       ``min(γ |h|, r)`` (m/s) instead of ``γ |h|``
+                                       (:func:`~fov_marl.control.safety.
+                                       neighbour_row_offsets`): a packed pair was
+                                       asked for 4 m/s, four times v_max; inf: no cap
 ``arc_yaw_guard``            True      the output's yaw rate is limited so that the
                                        exact arc of the step approaches no line of
                                        sight a row holds (b ≤ 0) further than the
@@ -461,6 +475,11 @@ class ControllerParams:
             the safe fallback's turn target, the one nearest the camera's axis wins.
         fallback_straight: a step the safe fallback keeps while a row holds or
             retreats is straight (ω = 0).
+        fallback_escape: the safe fallback escapes rather than stops (Section 1f of
+            :mod:`~fov_marl.control.safety`; :func:`~fov_marl.control.controller.
+            safe_fallback_inputs`).
+        safety_recovery_mps: (0, 100] or inf (m/s), the retreat a neighbour row within
+            D_s demands at most (:func:`~fov_marl.control.safety.neighbour_row_offsets`).
         arc_yaw_guard: limit the output's yaw rate so the step's arc approaches no
             held line of sight (:func:`~fov_marl.control.safety.arc_yaw_guard`).
         arc_guard_stop: where the arc guard would slow the turn, stop the translation
@@ -566,6 +585,8 @@ class ControllerParams:
     bearing_cone_max_deg: float = 45.0
     fallback_tie_mps: float = 0.25
     fallback_straight: bool = True
+    fallback_escape: bool = False
+    safety_recovery_mps: float = math.inf
     arc_yaw_guard: bool = True
     arc_guard_stop: bool = True
     hold_cleanup: bool = True
@@ -631,6 +652,7 @@ class ControllerParams:
             "lost_fov_yield",
             "lost_fov_yield_latch",
             "fallback_straight",
+            "fallback_escape",
             "arc_yaw_guard",
             "arc_guard_stop",
             "hold_cleanup",
@@ -690,6 +712,9 @@ class ControllerParams:
         _check("fallback_tie_mps", self.fallback_tie_mps, 0.0, 100.0)
         # inf turns the cut off (the default) / the leak off (the safety filter)
         check_real("lost_sigma_max_m", self.lost_sigma_max_m, 0.0, 1e6, lo_open=True, inf_ok=True)
+        check_real(
+            "safety_recovery_mps", self.safety_recovery_mps, 0.0, 100.0, lo_open=True, inf_ok=True
+        )
         check_real(
             "blind_travel_memory_s", self.blind_travel_memory_s, 0.0, 1e6, lo_open=True, inf_ok=True
         )

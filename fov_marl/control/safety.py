@@ -239,6 +239,41 @@ become approach-only rows with the distance to the clip box as clearance
 (:func:`detection_sector_rows`): with β ≤ π the robot approaches no bearing of F_i,
 with β > π it does not translate towards anything. β = 2π has nothing to contradict.
 
+1f. Robots packed inside D_s: a capped recovery and an escaping fallback (options)
+------------------------------------------------------------------------------
+
+Robots that start 1.1 m apart (the stress starts ``corner`` and ``wall``, D_s = 2 m) sit
+deep inside each other's barrier: with γ = 2.5 1/s a detected neighbour's row demands
+a retreat of ``γ |h| ≈ 4 m/s``, four times v_max, so the collision rows can never all
+be met, every packed robot takes the safe fallback, and the plain fallback (keep the
+QP's least-violation input only if it makes no row worse than standing still, else
+stop and turn to the most dangerous row) stops them all. Measured on this library's
+safety filter: from a packed wall or corner no robot of the team ever moved, whatever
+the policy behind it (pfcbf, ``ideal``, the learned one; N = 6, β = 120°, 500 steps),
+and pfcbf alone never left a packed corner. Two options (off by default) address it:
+
+* ``ControllerParams.safety_recovery_mps`` r caps the retreat a row demands below
+  D_s: ``γ h`` becomes ``max(γ h, −r)`` in :func:`neighbour_row_offsets` (the barrier's
+  class-K function saturates). ``h`` still does not decrease, so a packed pair never
+  closes; only the rate at which D_s is regained is bounded, and a robot with
+  neighbours on one side can meet its rows and use its QP (FoV levels and u*) again.
+* ``ControllerParams.fallback_escape``: the fallback projects the QP's input onto "no
+  row worse than standing still" (:func:`~fov_marl.control.controller.escape_translation`,
+  the very set the plain fallback accepts the input from) instead of dropping it, and
+  a robot left without translation turns towards the direction nearest the QP's that
+  its neighbour, cone and wall rows allow (:func:`~fov_marl.control.controller.escape_heading`)
+  rather than towards the most dangerous row: the blind rows there (budget, particles,
+  last-seen points) lapse once the camera looks, and the next step can leave.
+
+Measured with both (r = 0.25 m/s), N = 6, β = 120°, 500 steps, seeds 0 / 1: pfcbf alone
+leaves a packed corner (η 0.950 / 0.951, was 0.000 / 0.000) and a packed wall at η
+0.979 / 0.981 (was 0.991 / 0.990 for seed 0 / 1 with the plain fallback: slightly less);
+pfcbf behind the filter (options in both) leaves a packed wall (0.951 / 0.897, was 0 /
+0) but not a packed corner (η 0 / 0): the robots inside the lattice, boxed by the walls
+and by each other, are still held, and those that could leave alternate between the QP's
+FoV levels (turn to keep the neighbours behind in view) and the fallback's escape turn.
+No packed pair closed in any of these episodes (min 1.100 m).
+
 2. Blind rows: a speed bound per direction from the particles (Eq. 4)
 ====================================================================
 
@@ -1472,6 +1507,7 @@ def team_safety_rows(
         wall_gain=barrier_gain(params.wall_gain, config.dt_s),
         hold_band_m=params.safety_hold_band_m,
         hold_band_barrier=params.hold_band_barrier,
+        recovery_mps=params.safety_recovery_mps,
         fov_rad=config.fov_rad if fov_rad is None else fov_rad,
         blind_density_risk=params.blind_density_risk,
         last_seen_body=last_seen_body if use_last else None,
@@ -1527,6 +1563,7 @@ def neighbour_row_offsets(
     pred_mps: np.ndarray | None,
     gain: float,
     responsibility: float,
+    recovery_mps: float = math.inf,
 ) -> np.ndarray:
     """Offsets ``b`` (m/s) of the neighbour rows ``n · v ≤ b`` (Section 1), hold band included.
 
@@ -1544,15 +1581,31 @@ def neighbour_row_offsets(
     fell to the safe fallback, turned to the neighbour, was turned back by its FoV
     levels, and ω flipped every step.
 
+    **Recovery cap** (``recovery_mps`` = r, ``ControllerParams.safety_recovery_mps``):
+    below D_s the barrier's term ``γ h`` is used as ``max(γ h, −r)`` (and ``γ g`` likewise),
+    i.e. the extended class-K function of the barrier saturates at the recovery speed
+    r: a pair deep inside D_s is asked to separate at r, not at ``γ |h|``. With the
+    default γ = 2.5 1/s a detected pair packed 1.1 m apart had ``γ |h| ≈ 4 m/s``, four
+    times v_max, so the collision rows could never be met, every packed robot sat in
+    the safe fallback and stopped (Section 1f). The cap keeps what the barrier is for
+    below D_s: ``h`` does not decrease (the row still demands a retreat, ``b ≤ 0`` when
+    j is predicted to take its share), so the pair's distance to each other's band
+    never shrinks; only the rate at which D_s is regained is bounded. ``inf``
+    (the default) is the uncapped barrier.
+
     Args:
         h: ``(...)`` barrier values (m). g: ``hold_band(h, b)``, same shape.
         pred_mps: the closing speed j's model predicts along the line of sight (m/s),
             same shape, or None (j assumed to take its share).
         gain: γ (1/s, already capped by :func:`barrier_gain`). responsibility: ρ.
+        recovery_mps: r (m/s), > 0, or inf (no cap).
 
     Returns:
         ``(...)`` the offsets (m/s).
     """
+    if math.isfinite(recovery_mps):  # γ max(h, −r/γ) = max(γ h, −r)
+        h = np.maximum(h, -recovery_mps / gain)
+        g = np.maximum(g, -recovery_mps / gain)
     share = (1.0 - responsibility) * gain * h
     closing = share if pred_mps is None else np.maximum(share, pred_mps)
     return np.minimum(gain * h - closing, responsibility * gain * g)
@@ -1583,6 +1636,7 @@ def safety_rows(
     wall_gain: float,
     hold_band_m: float = 0.0,
     hold_band_barrier: bool = True,
+    recovery_mps: float = math.inf,
     fov_rad: float = 2.0 * math.pi,
     blind_density_risk: float = 0.0,
     last_seen_body: np.ndarray | None = None,
@@ -1634,6 +1688,7 @@ def safety_rows(
             camera's noise).
         hold_band_barrier: :func:`neighbour_row_offsets` (True) or the earlier
             ``γ g − max((1 − ρ) γ g, p)`` (False, ablation).
+        recovery_mps: the recovery cap of :func:`neighbour_row_offsets` (m/s); inf: none.
         bearing_cone_max_rad: cap on the half-angle α of the bearing cone of the
             neighbour rows within D_s (Section 1b, :func:`bearing_cone`); 0: none
             (one row along the mean's line of sight).
@@ -1694,7 +1749,7 @@ def safety_rows(
             ve = np.asarray(velocity_est_body, dtype=np.float64)
             pred = -(n[..., 0] * ve[..., 0] + n[..., 1] * ve[..., 1])
         if hold_band_barrier:
-            b = neighbour_row_offsets(h, g, pred, safety_gain, responsibility)
+            b = neighbour_row_offsets(h, g, pred, safety_gain, responsibility, recovery_mps)
         else:  # the earlier rows (ablation): the band also demanded j's whole closing
             closing_j = (1.0 - responsibility) * safety_gain * g
             if pred is not None:

@@ -1574,3 +1574,153 @@ def test_bearing_travel_floor_is_zero_beyond_d_s_and_spends_all_of_a_packed_bear
     behind = np.abs(((ang - 180.0) + 180.0) % 360.0 - 180.0)
     half = math.degrees(math.asin(slack / 1.1)) + 7.5
     np.testing.assert_array_equal(f, np.where(behind <= half + 1e-6, 0.5, 0.0))
+
+
+# ------------------------------------------------ packed robots: cap and escape (1f)
+@settings(max_examples=300, deadline=None)
+@given(
+    h=st.floats(-3.0, 6.0),
+    pred=st.one_of(st.none(), st.floats(-1.5, 1.5)),
+    band=st.floats(0.0, 1.0),
+    gain=st.floats(0.1, 5.0),
+    rho=st.floats(0.05, 1.0),
+    cap=st.floats(0.01, 2.0),
+)
+def test_recovery_cap_only_bounds_the_retreat_below_ds(h, pred, band, gain, rho, cap):
+    """The cap r replaces γ h by max(γ h, −r): unchanged at and above D_s and wherever
+    γ |h| ≤ r; below D_s the row still never allows an approach j's assumed closing
+    does not leave (h does not decrease) and demands at most what the uncapped barrier
+    demands."""
+    hh = np.array(h)
+    p = None if pred is None else np.array(pred)
+    g = hold_band(hh, band)
+    free = float(neighbour_row_offsets(hh, g, p, gain, rho))
+    capped = float(neighbour_row_offsets(hh, g, p, gain, rho, cap))
+    if h >= 0.0 or gain * h >= -cap:
+        assert capped == pytest.approx(free, abs=1e-12)
+        return
+    assert capped >= free - 1e-12  # never more retreat than the uncapped row
+    gh = max(gain * h, -cap)
+    closing = (1.0 - rho) * gh if pred is None else max((1.0 - rho) * gh, pred)
+    assert capped + closing <= 1e-12  # i plus j's assumed closing: no approach below D_s
+    if pred is None:  # j takes its share: i retreats at its share of the cap
+        assert capped == pytest.approx(-rho * cap, abs=1e-12)
+
+
+def test_recovery_cap_reaches_the_rows_through_the_params():
+    """A detected neighbour 1.1 m ahead (inside D_s): the uncapped row demands ~2 m/s
+    of retreat (more than v_max), the capped one r ρ."""
+    mean = np.array([[[1.1, 0.0]]])
+    cov = np.array([[np.eye(2) * 0.01]])
+    kw = dict(
+        mean_body=mean, cov_body=cov, detected=np.array([[True]]), pose_world=None,
+        particles_body=None, particle_mass=None, safety_distance_m=2.0, v_max_mps=1.0,
+        omega_max_radps=1.5, dt_s=0.2, arena_size_m=40.0, robot_radius_m=0.5,
+        safety_risk=0.01, safety_gain=2.5, responsibility=0.5, blind_bins=0,
+        blind_risk=0.0, blind_speed_mps=0.05, walls=False, wall_gain=2.5,
+    )  # fmt: skip
+    free = safety_rows(**kw)
+    capped = safety_rows(**kw, recovery_mps=0.25)
+    nb = free.kind[0] == ROW_NEIGHBOUR
+    assert free.b[0][nb].min() < -1.0
+    np.testing.assert_allclose(capped.b[0][nb], -0.125, atol=1e-12)
+    with pytest.raises(ValueError, match="safety_recovery_mps"):
+        ControllerParams(safety_recovery_mps=0.0)
+    with pytest.raises(ValueError, match="safety_recovery_mps"):
+        ControllerParams(safety_recovery_mps=float("nan"))
+    assert ControllerParams(safety_recovery_mps=math.inf).safety_recovery_mps == math.inf
+
+
+def _random_rows(rng, k):
+    ang = rng.uniform(-math.pi, math.pi, k)
+    A = np.zeros((k, 3))
+    A[:, 0], A[:, 1] = np.cos(ang), np.sin(ang)
+    b = rng.uniform(-1.5, 1.0, k)
+    return A, b
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), k=st.integers(1, 8))
+def test_escape_translation_is_the_nearest_step_no_worse_than_standing_still(seed, k):
+    """Against a brute-force reference: the result meets every row as well as standstill
+    does (Ã w ≥ min(−b̃, 0)), lies in the polygon, and no sampled point that does is
+    nearer the wanted translation."""
+    from fov_marl.control.controller import escape_translation
+    from fov_marl.control.qp import polygon_normals
+
+    rng = np.random.default_rng(seed)
+    A, b = _random_rows(rng, k)
+    v = rng.uniform(-1.0, 1.0, 2)
+    w = escape_translation(v, A, b, 1.0, 16)
+    assert w is not None
+    lo = np.minimum(-b, 0.0)
+    assert (A[:, :2] @ w - lo).min() >= -1e-9
+    nrm, apothem = polygon_normals(16), math.cos(math.pi / 16)
+    assert (nrm @ w).max() <= apothem + 1e-9
+    g = np.linspace(-1.0, 1.0, 161)
+    pts = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    ok = ((pts @ A[:, :2].T) >= lo).all(axis=1) & ((pts @ nrm.T) <= apothem).all(axis=1)
+    best = np.linalg.norm(pts[ok] - v, axis=1).min()
+    assert np.linalg.norm(w - v) <= best + 1e-9
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), k=st.integers(1, 8))
+def test_escape_heading_matches_a_loop_reference(seed, k):
+    """The heading is the tried direction nearest the wanted translation among those the
+    neighbour, cone and wall rows allow (blind rows are not asked), NaN when none is."""
+    from fov_marl.control.controller import escape_heading
+
+    rng = np.random.default_rng(seed)
+    A, b = _random_rows(rng, k)
+    kind = rng.choice([ROW_NEIGHBOUR, ROW_CONE, ROW_WALL, 1, 4, 5, 6], k).astype(np.int8)
+    v = rng.uniform(-1.0, 1.0, 2)
+    got = escape_heading(v[None], A[None], b[None], kind[None], np.ones((1, k), bool))[0]
+    best, best_off = math.nan, math.inf
+    for j in range(72):
+        a = -math.pi + 2.0 * math.pi * j / 72
+        d = np.array([math.cos(a), math.sin(a)])
+        fine = all(
+            0.1 * (A[r, :2] @ d) >= min(-b[r], 0.0) - 1e-12
+            for r in range(k)
+            if kind[r] in (ROW_NEIGHBOUR, ROW_CONE, ROW_WALL)
+        )
+        off = abs(math.remainder(a - math.atan2(v[1], v[0]), 2.0 * math.pi))
+        if fine and off < best_off - 1e-12:
+            best, best_off = a, off
+    if math.isnan(best):
+        assert math.isnan(got)
+    else:
+        assert got == pytest.approx(best, abs=1e-9)
+
+
+def test_escaping_fallback_steps_out_instead_of_stopping():
+    """A robot with neighbours ahead and to its left inside D_s (retreat demanded at
+    more than it can do) and a wall on its right: the plain fallback stops it, the
+    escaping one steps back-right, approaching none of the three and straight; with no
+    free step it turns towards the escape direction nearest the QP's, not towards the
+    most dangerous row; the loop and the batched controller agree."""
+    from fov_marl.control.batched import BatchedFovCbfController
+
+    A = np.array([[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 1.0, 0.0]])
+    b = np.array([-2.0, -2.0, 0.3])
+    kind = np.array([ROW_NEIGHBOUR, ROW_NEIGHBOUR, ROW_WALL], np.int8)
+    u_qp = np.array([-0.8, -0.6, 0.7])  # the least-violation input overshoots the wall row
+    plain = FovCbfController(CFG, ControllerParams())._safe_fallback(u_qp, A, b, kind)
+    assert plain[:2].tolist() == [0.0, 0.0]
+    par = ControllerParams(fallback_escape=True)
+    esc = FovCbfController(CFG, par)._safe_fallback(u_qp, A, b, kind)
+    assert esc[0] < -0.5 and esc[1] < 0.0 and esc[2] == 0.0
+    assert (A[:, :2] @ esc[:2] - np.minimum(-b, 0.0)).min() >= -1e-9
+    batch = BatchedFovCbfController(CFG, par)._safe_fallback(
+        u_qp[None], A[None], b[None], kind[None], np.ones((1, 3), bool)
+    )
+    np.testing.assert_allclose(batch[0], esc, atol=1e-12)
+    # the wall now at rest on the right (b̃ = 0): no translation qualifies but the
+    # back-left bearings, and u_qp asks for back-right; blind rows behind do not count
+    A2 = np.concatenate([A, [[1.0, 0.0, 0.0]]])
+    b2 = np.array([-2.0, 0.0, 0.0, 0.0])
+    kind2 = np.array([ROW_NEIGHBOUR, ROW_NEIGHBOUR, ROW_WALL, 6], np.int8)
+    out = FovCbfController(CFG, par)._safe_fallback(np.array([-0.8, -0.6, 0.0]), A2, b2, kind2)
+    assert out[:2].tolist() == [0.0, 0.0]
+    assert out[2] < 0.0  # turns towards the back (−180°), not the neighbour ahead (0°)
