@@ -535,7 +535,7 @@ class BatchedFovCbfController:
                 if sf.any():
                     f = qi[sf]
                     u_qp = np.where((qres.status[sf] == _FAIL)[:, None], np.nan, qres.u[sf])
-                    res_u[f] = self._safe_fallback(u_qp, sA[f], sb[f], sk[f], skeep[f])
+                    res_u[f] = self._safe_fallback(u_qp, sA[f], sb[f], sk[f], skeep[f], us[f])
                     status[f] = _SFB
                     fallback[f] = True
                     self.stats["safety_fallbacks"] += int(f.size)
@@ -666,13 +666,13 @@ class BatchedFovCbfController:
         yielded[c_i[use]] = True
         return yielded
 
-    def _safe_fallback(self, u_qp, A, b, kind, keep) -> np.ndarray:
+    def _safe_fallback(self, u_qp, A, b, kind, keep, u_star=None) -> np.ndarray:
         """:meth:`FovCbfController._safe_fallback` for ``(F,)`` robots (u_qp NaN rows: None)."""
         p = self.params
         return safe_fallback_inputs(
             u_qp, A, b, kind, keep, p.look_gain, self.config.omega_max_radps,
             p.fallback_tie_mps, p.fallback_straight, p.fallback_escape, self.config.v_max_mps,
-            p.n_polygon,
+            p.n_polygon, u_star,
         )  # fmt: skip
 
     def _solve_loop(

@@ -272,6 +272,7 @@ def safe_fallback_inputs(
     escape: bool = False,
     v_max_mps: float = 1.0,
     n_polygon: int = 16,
+    u_star: np.ndarray | None = None,
 ) -> np.ndarray:
     """The safe fallback of :meth:`FovCbfController._safe_fallback` for ``F`` robots.
 
@@ -283,11 +284,17 @@ def safe_fallback_inputs(
         tie_mps: rows within this of the smallest ``b̃`` tie as the turn target
             (``ControllerParams.fallback_tie_mps``); straight: drop ω of a kept step
             while a row holds or retreats (``fallback_straight``).
-        escape: ``ControllerParams.fallback_escape``: a ``u_qp`` that makes a row
-            worse is projected (:func:`escape_translation`) instead of dropped, and a
-            robot left without translation turns towards the escape direction nearest
-            ``u_qp``'s (:func:`escape_heading`) instead of the most dangerous row.
+        escape: ``ControllerParams.fallback_escape``: where ``u_qp`` makes a row
+            worse, the wanted input (``u_star``, else ``u_qp``) is projected
+            (:func:`escape_translation`) instead of dropped, and a robot left without
+            translation turns towards the escape direction nearest the wanted one
+            (:func:`escape_heading`) instead of the most dangerous row.
         v_max_mps, n_polygon: the admissible polygon (with ``escape``).
+        u_star: ``(F, 3)`` the desired inputs the controller was given (after its look
+            where you go), or None: the escape aims at them, the least change to what
+            was asked that no collision row forbids (measured: aiming at ``u_qp``, the
+            hierarchy's compromise, robots packed along a wall and rushing to one
+            point turned away from where they were sent, step after step).
 
     Returns:
         ``(F, 3)`` body-frame inputs ``[vx, vy, ω]``.
@@ -300,12 +307,13 @@ def safe_fallback_inputs(
     out = np.zeros((u_qp.shape[0], 3))
     out[okm] = uq[okm]
     moved = okm.copy()
+    want = uq if u_star is None else np.where(np.isfinite(u_star), u_star, 0.0)
     if escape:
-        for f in np.flatnonzero(~okm & has):  # rare: robot by robot, as hold_cleanup
+        for f in np.flatnonzero(~okm):  # rare: robot by robot, as hold_cleanup
             k = keep[f]
-            w = escape_translation(uq[f, :2], A[f, k], b[f, k], v_max_mps, n_polygon)
+            w = escape_translation(want[f, :2], A[f, k], b[f, k], v_max_mps, n_polygon)
             if w is not None and math.hypot(w[0], w[1]) > _ESCAPE_MIN_FRACTION * v_max_mps:
-                out[f, :2], out[f, 2] = w, uq[f, 2]
+                out[f, :2], out[f, 2] = w, want[f, 2]
                 moved[f] = True
     if straight:  # a held or retreating row: a straight step, no arc
         out[moved & (keep & (b <= tol)).any(axis=1), 2] = 0.0
@@ -314,7 +322,7 @@ def safe_fallback_inputs(
     gain = look_gain if look_gain > 0 else 3.0
     if escape and (~moved).any():
         stuck = np.flatnonzero(~moved)
-        phi = escape_heading(uq[stuck, :2], A[stuck], b[stuck], kind[stuck], keep[stuck])
+        phi = escape_heading(want[stuck, :2], A[stuck], b[stuck], kind[stuck], keep[stuck])
         found = np.isfinite(phi)
         out[stuck[found], 2] = np.clip(gain * phi[found], -omega_max_radps, omega_max_radps)
         anyw[stuck[found]] = False
@@ -729,7 +737,12 @@ class FovCbfController:
         return alt
 
     def _safe_fallback(
-        self, u_qp: np.ndarray | None, A: np.ndarray, b: np.ndarray, kind: np.ndarray
+        self,
+        u_qp: np.ndarray | None,
+        A: np.ndarray,
+        b: np.ndarray,
+        kind: np.ndarray,
+        u_star: np.ndarray | None = None,
     ) -> np.ndarray:
         """The collision rows cannot all be met: the documented safe fallback.
 
@@ -757,7 +770,7 @@ class FovCbfController:
         return safe_fallback_inputs(
             u, A[None], b[None], kind[None], keep, p.look_gain, self.config.omega_max_radps,
             p.fallback_tie_mps, p.fallback_straight, p.fallback_escape, self.config.v_max_mps,
-            p.n_polygon,
+            p.n_polygon, None if u_star is None else np.asarray(u_star, np.float64)[None],
         )[0]  # fmt: skip
 
     def solve(
@@ -946,7 +959,7 @@ class FovCbfController:
             if fixed is not None:
                 u = fixed
         if sb.size and unmet:
-            u = self._safe_fallback(None if qres.status == "qp_failed" else u, sA, sb, sk)
+            u = self._safe_fallback(None if qres.status == "qp_failed" else u, sA, sb, sk, u_star)
             status, fallback = "safety_fallback", True
             st["safety_fallbacks"] += 1
         if sb.size and p.arc_yaw_guard:  # safety Section 1c: the step's arc

@@ -250,29 +250,36 @@ QP's least-violation input only if it makes no row worse than standing still, el
 stop and turn to the most dangerous row) stops them all. Measured on this library's
 safety filter: from a packed wall or corner no robot of the team ever moved, whatever
 the policy behind it (pfcbf, ``ideal``, the learned one; N = 6, β = 120°, 500 steps),
-and pfcbf alone never left a packed corner. Two options (off by default) address it:
+and pfcbf alone stayed in a packed corner (seed 0). Two options (off by default) address it:
 
 * ``ControllerParams.safety_recovery_mps`` r caps the retreat a row demands below
   D_s: ``γ h`` becomes ``max(γ h, −r)`` in :func:`neighbour_row_offsets` (the barrier's
   class-K function saturates). ``h`` still does not decrease, so a packed pair never
   closes; only the rate at which D_s is regained is bounded, and a robot with
   neighbours on one side can meet its rows and use its QP (FoV levels and u*) again.
-* ``ControllerParams.fallback_escape``: the fallback projects the QP's input onto "no
-  row worse than standing still" (:func:`~fov_marl.control.controller.escape_translation`,
-  the very set the plain fallback accepts the input from) instead of dropping it, and
-  a robot left without translation turns towards the direction nearest the QP's that
-  its neighbour, cone and wall rows allow (:func:`~fov_marl.control.controller.escape_heading`)
-  rather than towards the most dangerous row: the blind rows there (budget, particles,
-  last-seen points) lapse once the camera looks, and the next step can leave.
+* ``ControllerParams.fallback_escape``: where the QP's input makes a row worse, the
+  fallback projects the *desired* input u* onto "no row worse than standing still"
+  (:func:`~fov_marl.control.controller.escape_translation`, the very set the plain
+  fallback accepts the QP's input from) instead of stopping, and a robot left without
+  translation turns towards the direction nearest u*'s that its neighbour, cone and
+  wall rows allow (:func:`~fov_marl.control.controller.escape_heading`) rather than
+  towards the most dangerous row: the blind rows there (budget, particles, last-seen
+  points) lapse once the camera looks, and a later step can leave. (Aiming at the QP's
+  least-violation input instead, robots packed along a wall and rushing to one point
+  turned away from where they were sent.)
 
-Measured with both (r = 0.25 m/s), N = 6, β = 120°, 500 steps, seeds 0 / 1: pfcbf alone
-leaves a packed corner (η 0.950 / 0.951, was 0.000 / 0.000) and a packed wall at η
-0.979 / 0.981 (was 0.991 / 0.990 for seed 0 / 1 with the plain fallback: slightly less);
-pfcbf behind the filter (options in both) leaves a packed wall (0.951 / 0.897, was 0 /
-0) but not a packed corner (η 0 / 0): the robots inside the lattice, boxed by the walls
-and by each other, are still held, and those that could leave alternate between the QP's
-FoV levels (turn to keep the neighbours behind in view) and the fallback's escape turn.
-No packed pair closed in any of these episodes (min 1.100 m).
+Measured with both (r = 0.25 m/s), N = 6, β = 120°, 500 steps, seeds 0 / 1 (η at the
+end; the plain fallback in brackets): pfcbf alone, packed corner 0.897 / 0.951 (0.000 /
+0.888), packed wall 0.917 / 0.987 (0.991 / 0.990); pfcbf behind the filter, options in
+both, packed wall 0.920 / 0.900 (0 / 0), packed corner 0.224 / 0.000 (0 / 0). What still
+holds robots: the budget per bearing (Sections 2e, 2g) leaves a robot packed beside a
+neighbour no out-of-view bearing within ~60° of the neighbour's, so it may leave only
+straight away from it or towards what it sees, and a policy that turns it back towards
+its goal (``rush``: no robot of 6 got 2 m from a packed wall or corner start in 300
+steps, seeds 0-3, with or without the options) or the FoV levels of pfcbf (turn to keep
+the neighbours behind in view) undo the escape turn step after step; the robots inside a
+corner lattice are boxed in by walls and neighbours until the outer ones leave. No
+packed pair closed in any of these episodes (min 1.100 m).
 
 2. Blind rows: a speed bound per direction from the particles (Eq. 4)
 ====================================================================

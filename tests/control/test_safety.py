@@ -1724,3 +1724,20 @@ def test_escaping_fallback_steps_out_instead_of_stopping():
     out = FovCbfController(CFG, par)._safe_fallback(np.array([-0.8, -0.6, 0.0]), A2, b2, kind2)
     assert out[:2].tolist() == [0.0, 0.0]
     assert out[2] < 0.0  # turns towards the back (−180°), not the neighbour ahead (0°)
+
+
+def test_escaping_fallback_aims_at_what_was_asked():
+    """Given the desired input, the escape projects it (not the QP's compromise): a robot
+    asked to go right (u* = [0, −1]) with a neighbour ahead inside D_s and the QP's
+    least-violation input backing off to the left steps right, approaching nothing."""
+    A = np.array([[-1.0, 0.0, 0.0]])  # neighbour ahead, retreat demanded
+    b = np.array([-2.0])
+    kind = np.array([ROW_NEIGHBOUR], np.int8)
+    u_qp = np.array([-0.9, 0.4, 0.0])  # the hierarchy's compromise: makes nothing worse
+    u_star = np.array([0.3, -1.0, 0.2])
+    ctrl = FovCbfController(CFG, ControllerParams(fallback_escape=True))
+    kept = ctrl._safe_fallback(u_qp, A, b, kind, u_star)
+    np.testing.assert_array_equal(kept, [-0.9, 0.4, 0.0])  # a u_qp that qualifies is kept
+    worse = np.array([0.5, 0.4, 0.0])  # approaches the neighbour
+    out = ctrl._safe_fallback(worse, A, b, kind, u_star)
+    assert out[0] == pytest.approx(0.0, abs=1e-9) and out[1] < -0.9 and out[2] == 0.0
