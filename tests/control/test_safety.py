@@ -1643,24 +1643,35 @@ def _random_rows(rng, k):
 @given(seed=st.integers(0, 2**31 - 1), k=st.integers(1, 8))
 def test_escape_translation_is_the_nearest_step_no_worse_than_standing_still(seed, k):
     """Against a brute-force reference: the result meets every row as well as standstill
-    does (Ã w ≥ min(−b̃, 0)), lies in the polygon, and no sampled point that does is
-    nearer the wanted translation."""
+    does (Ã w ≥ min(−b̃, 0)), leaves every widened held row by the margin angle
+    (Ã w ≥ sin(10°) ‖w‖), lies in the polygon, and no sampled point that does all this
+    is nearer the wanted translation."""
     from fov_marl.control.controller import escape_translation
     from fov_marl.control.qp import polygon_normals
 
     rng = np.random.default_rng(seed)
     A, b = _random_rows(rng, k)
+    widen = rng.random(k) < 0.5
     v = rng.uniform(-1.0, 1.0, 2)
-    w = escape_translation(v, A, b, 1.0, 16)
+    w = escape_translation(v, A, b, 1.0, 16, widen)
     assert w is not None
     lo = np.minimum(-b, 0.0)
-    assert (A[:, :2] @ w - lo).min() >= -1e-9
+    margin = math.sin(math.radians(10.0))
+    held = widen & (b <= 0.0)
+
+    def ok(p: np.ndarray, tol: float) -> np.ndarray:
+        val = p @ A[:, :2].T  # (S, K)
+        norm = np.linalg.norm(p, axis=-1)[:, None]
+        need = np.where(held[None], margin * norm, lo[None])
+        return (val >= need - tol).all(axis=1)
+
+    assert ok(w[None], 1e-9)[0]
     nrm, apothem = polygon_normals(16), math.cos(math.pi / 16)
     assert (nrm @ w).max() <= apothem + 1e-9
     g = np.linspace(-1.0, 1.0, 161)
     pts = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
-    ok = ((pts @ A[:, :2].T) >= lo).all(axis=1) & ((pts @ nrm.T) <= apothem).all(axis=1)
-    best = np.linalg.norm(pts[ok] - v, axis=1).min()
+    fine = ok(pts, 0.0) & ((pts @ nrm.T) <= apothem).all(axis=1)
+    best = np.linalg.norm(pts[fine] - v, axis=1).min()
     assert np.linalg.norm(w - v) <= best + 1e-9
 
 
@@ -1728,8 +1739,8 @@ def test_escaping_fallback_steps_out_instead_of_stopping():
 
 def test_escaping_fallback_aims_at_what_was_asked():
     """Given the desired input, the escape projects it (not the QP's compromise): a robot
-    asked to go right (u* = [0, −1]) with a neighbour ahead inside D_s and the QP's
-    least-violation input backing off to the left steps right, approaching nothing."""
+    asked to go right and a little forward with a neighbour ahead inside D_s, the QP's
+    input approaching it, steps right and 10° back, approaching nothing."""
     A = np.array([[-1.0, 0.0, 0.0]])  # neighbour ahead, retreat demanded
     b = np.array([-2.0])
     kind = np.array([ROW_NEIGHBOUR], np.int8)
@@ -1740,4 +1751,7 @@ def test_escaping_fallback_aims_at_what_was_asked():
     np.testing.assert_array_equal(kept, [-0.9, 0.4, 0.0])  # a u_qp that qualifies is kept
     worse = np.array([0.5, 0.4, 0.0])  # approaches the neighbour
     out = ctrl._safe_fallback(worse, A, b, kind, u_star)
-    assert out[0] == pytest.approx(0.0, abs=1e-9) and out[1] < -0.9 and out[2] == 0.0
+    assert out[1] < -0.8 and out[2] == 0.0
+    # not straight across the estimated line of sight: 10° away from the neighbour
+    speed = math.hypot(out[0], out[1])
+    assert -out[0] == pytest.approx(math.sin(math.radians(10.0)) * speed, abs=1e-9)
