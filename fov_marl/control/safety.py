@@ -269,17 +269,21 @@ and pfcbf alone stayed in a packed corner (seed 0). Two options (off by default)
   turned away from where they were sent.)
 
 Measured with both (r = 0.25 m/s), N = 6, β = 120°, 500 steps, seeds 0 / 1 (η at the
-end; the plain fallback in brackets): pfcbf alone, packed corner 0.897 / 0.951 (0.000 /
-0.888), packed wall 0.917 / 0.987 (0.991 / 0.990); pfcbf behind the filter, options in
-both, packed wall 0.920 / 0.900 (0 / 0), packed corner 0.224 / 0.000 (0 / 0). What still
-holds robots: the budget per bearing (Sections 2e, 2g) leaves a robot packed beside a
-neighbour no out-of-view bearing within ~60° of the neighbour's, so it may leave only
-straight away from it or towards what it sees, and a policy that turns it back towards
-its goal (``rush``: no robot of 6 got 2 m from a packed wall or corner start in 300
-steps, seeds 0-3, with or without the options) or the FoV levels of pfcbf (turn to keep
-the neighbours behind in view) undo the escape turn step after step; the robots inside a
+end; the plain fallback in brackets): pfcbf alone, packed corner 0.897 / 0.196 (0.000 /
+0.888), packed wall 0.980 / 0.987 (0.991 / 0.990); pfcbf behind the filter, options in
+both, packed wall 0.917 / 0.896 (0 / 0), packed corner 0 / 0 (0 / 0). So they free some
+teams and cost others (pfcbf's corner, seed 1): they stay off. What still holds robots:
+the budget per bearing (Sections 2e, 2g) leaves a robot packed beside a neighbour no
+out-of-view bearing within ~60° of the neighbour's, so it may leave only straight away
+from it or towards what it sees, and a policy that turns it back towards its goal
+(``rush``: no robot of 6 got 2 m from a packed wall or corner start in 300 steps, seeds
+0-3, with or without the options) or the FoV levels of pfcbf (turn to keep the
+neighbours behind in view) undo the escape turn step after step; the robots inside a
 corner lattice are boxed in by walls and neighbours until the outer ones leave. No
-packed pair closed in any of these episodes (min 1.100 m).
+packed pair closed in any of these episodes (min 1.100 m), nor in the packed stress
+sweep with both options (every adversary, N, β of the grid, wall and corner starts, 360
+episodes, ``fov-marl stress --starts wall,corner --episodes 1 --seed 91000 --filter-
+controller fallback_escape=true --filter-controller safety_recovery_mps=0.25``).
 
 2. Blind rows: a speed bound per direction from the particles (Eq. 4)
 ====================================================================
