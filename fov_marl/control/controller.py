@@ -792,6 +792,9 @@ class FovCbfController:
         along a wall between two neighbours turned back and forth step after step as
         the two swapped on the estimate's noise). The bearing cone's rows
         (``ROW_CONE``) are not targets: their directions lie ``α`` off the line of sight.
+        With ``params.fallback_escape`` (safety Section 1f) the robot instead steps the
+        nearest ``u_star`` no row is worse for than standing still, else turns towards
+        the escape direction nearest ``u_star``'s (:func:`safe_fallback_inputs`).
         """
         u = np.full((1, 3), np.nan) if u_qp is None else np.asarray(u_qp, np.float64)[None]
         keep = np.ones((1, b.shape[0]), dtype=bool)
