@@ -204,13 +204,14 @@ def escape_translation(
     v_max: float,
     n_polygon: int,
     widen: np.ndarray | None = None,
-) -> np.ndarray | None:
+) -> np.ndarray:
     """The translation nearest ``v`` that makes no collision row worse than standing still.
 
     Projects ``v`` onto ``{w : Ã w ≥ min(−b̃, 0)} ∩ polygon`` (the rows that hold at
     standstill stay met, those that do not are not approached) by one least-distance
     program (:func:`~fov_marl.control.qp.least_distance`). ``w = 0`` is always in the
-    set, so only numerical trouble returns None.
+    set and is returned where the program fails numerically (a set with no interior,
+    e.g. one ray between a widened row and another held row).
 
     The rows flagged in ``widen`` that hold or demand retreat (``b̃ ≤ 0``: a neighbour
     or its bearing cone, inside D_s) are replaced by their two copies turned by
@@ -229,7 +230,7 @@ def escape_translation(
         widen: ``(K,)`` bool, the rows to widen (None: none).
 
     Returns:
-        ``(2,)`` the translation, or None.
+        ``(2,)`` the translation.
     """
     from fov_marl.control.qp import least_distance, polygon_normals
 
@@ -250,11 +251,11 @@ def escape_translation(
     G = np.concatenate([Av, -nrm])
     h = np.concatenate([lo - Av @ v, -apothem + nrm @ v])
     y = least_distance(G, h)
-    if y is None:
-        return None
+    if y is None:  # numerically inconsistent: the set has no interior near v
+        return np.zeros(2)
     w = v + y
     if (Av @ w - lo).min(initial=0.0) < -1e-12 or (nrm @ w).max() > apothem + 1e-12:
-        return None
+        return np.zeros(2)
     return w
 
 
@@ -341,7 +342,7 @@ def safe_fallback_inputs(
             k = keep[f]
             near = (kind[f, k] == ROW_NEIGHBOUR) | (kind[f, k] == ROW_CONE)
             w = escape_translation(want[f, :2], A[f, k], b[f, k], v_max_mps, n_polygon, near)
-            if w is not None and math.hypot(w[0], w[1]) > _ESCAPE_MIN_FRACTION * v_max_mps:
+            if math.hypot(w[0], w[1]) > _ESCAPE_MIN_FRACTION * v_max_mps:
                 out[f, :2], out[f, 2] = w, want[f, 2]
                 moved[f] = True
     if straight:  # a held or retreating row: a straight step, no arc

@@ -1654,7 +1654,6 @@ def test_escape_translation_is_the_nearest_step_no_worse_than_standing_still(see
     widen = rng.random(k) < 0.5
     v = rng.uniform(-1.0, 1.0, 2)
     w = escape_translation(v, A, b, 1.0, 16, widen)
-    assert w is not None
     lo = np.minimum(-b, 0.0)
     margin = math.sin(math.radians(10.0))
     held = widen & (b <= 0.0)
@@ -1735,6 +1734,21 @@ def test_escaping_fallback_steps_out_instead_of_stopping():
     out = FovCbfController(CFG, par)._safe_fallback(np.array([-0.8, -0.6, 0.0]), A2, b2, kind2)
     assert out[:2].tolist() == [0.0, 0.0]
     assert out[2] < 0.0  # turns towards the back (−180°), not the neighbour ahead (0°)
+
+
+def test_escape_translation_stands_still_where_the_program_fails():
+    """The traced hypothesis case (seed 26590): a held row and a widened one leave
+    (nearly) one ray, the least-distance program reports the rows inconsistent, and the
+    step is standstill, which meets every row."""
+    from fov_marl.control.controller import escape_translation
+
+    rng = np.random.default_rng(26590)
+    A, b = _random_rows(rng, 2)
+    widen = rng.random(2) < 0.5
+    v = rng.uniform(-1.0, 1.0, 2)
+    assert widen.tolist() == [False, True] and (b <= 0.0).all()
+    w = escape_translation(v, A, b, 1.0, 16, widen)
+    assert w.tolist() == [0.0, 0.0]
 
 
 def test_escaping_fallback_aims_at_what_was_asked():
