@@ -336,8 +336,8 @@ def safe_fallback_inputs(
     out = np.zeros((u_qp.shape[0], 3))
     out[okm] = uq[okm]
     moved = okm.copy()
-    want = uq if u_star is None else np.where(np.isfinite(u_star), u_star, 0.0)
     if escape:
+        want = uq if u_star is None else np.where(np.isfinite(u_star), u_star, 0.0)
         for f in np.flatnonzero(~okm):  # rare: robot by robot, as hold_cleanup
             k = keep[f]
             near = (kind[f, k] == ROW_NEIGHBOUR) | (kind[f, k] == ROW_CONE)

@@ -262,14 +262,18 @@ def test_hold_band_is_a_dead_zone():
     np.testing.assert_array_equal(hold_band(h, 0.0), h)
 
 
-@settings(max_examples=300, deadline=None)
-@given(
+#: the inputs of :func:`neighbour_row_offsets` the property tests draw
+_ROW_OFFSET_INPUTS = dict(
     h=st.floats(-3.0, 6.0),
     pred=st.one_of(st.none(), st.floats(-1.5, 1.5)),
     band=st.floats(0.0, 1.0),
     gain=st.floats(0.1, 5.0),
     rho=st.floats(0.05, 1.0),
 )
+
+
+@settings(max_examples=300, deadline=None)
+@given(**_ROW_OFFSET_INPUTS)
 def test_neighbour_row_offsets_keep_the_barrier_and_the_band(h, pred, band, gain, rho):
     """The row is the barrier with shared responsibility capped by the band's share:
     never more approach than the barrier allows (so h_{k+1} >= (1 - γ dt) h_k when j
@@ -1578,14 +1582,7 @@ def test_bearing_travel_floor_is_zero_beyond_d_s_and_spends_all_of_a_packed_bear
 
 # ------------------------------------------------ packed robots: cap and escape (1f)
 @settings(max_examples=300, deadline=None)
-@given(
-    h=st.floats(-3.0, 6.0),
-    pred=st.one_of(st.none(), st.floats(-1.5, 1.5)),
-    band=st.floats(0.0, 1.0),
-    gain=st.floats(0.1, 5.0),
-    rho=st.floats(0.05, 1.0),
-    cap=st.floats(0.01, 2.0),
-)
+@given(**_ROW_OFFSET_INPUTS, cap=st.floats(0.01, 2.0))
 def test_recovery_cap_only_bounds_the_retreat_below_ds(h, pred, band, gain, rho, cap):
     """The cap r replaces γ h by max(γ h, −r): unchanged at and above D_s and wherever
     γ |h| ≤ r; below D_s the row still never allows an approach j's assumed closing
