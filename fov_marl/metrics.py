@@ -75,6 +75,7 @@ __all__ = [
     "pairwise_distances",
     "pairwise_distances_batch",
     "min_pairwise_distance",
+    "pair_encroachment",
     "collision_pairs",
     "safety_violations",
     "per_robot_counts",
@@ -811,6 +812,54 @@ def min_pairwise_distance(positions_world: np.ndarray) -> float:
         return math.inf
     iu = np.triu_indices(d.shape[0], k=1)
     return float(d[iu].min())
+
+
+def pair_encroachment(
+    d_start_m: np.ndarray, d_min_m: np.ndarray, safety_distance_m: float
+) -> float:
+    """How much closer than it was owed any pair of robots came (m), for stress sweeps.
+
+    A pair that starts at least D_s apart is owed D_s (the paper's safety row, Eq. 12
+    row 3). A pair that starts inside D_s (a packed start) cannot be owed D_s from its
+    first step; it is owed its start distance, since the barrier asks a pair inside D_s
+    not to close (``fov_marl.control.safety``, Section 1). So the owed distance of pair
+    (i, j) is ``min(d_start_ij, D_s)`` and the result is
+
+        max over i ≠ j of  max(0, min(d_start_ij, D_s) − d_min_ij).
+
+    0.0 when no pair came closer than it was owed. A team's ``D_s`` events count the
+    start itself for packed pairs; this does not, so it tells a packed team that holds
+    its spacing from one that closes.
+
+    Args:
+        d_start_m: ``(N, N)`` centre distances at the start (m), e.g.
+            :func:`pairwise_distances` of the start positions; the diagonal is ignored.
+        d_min_m: ``(N, N)`` smallest centre distance of each pair over the episode
+            (m), the start included; the diagonal is ignored.
+        safety_distance_m: D_s (m), finite and > 0.
+
+    Returns:
+        The encroachment (m), >= 0; 0.0 for N < 2.
+
+    Raises:
+        ValueError: shapes that are not the same ``(N, N)``, a NaN off the diagonal, or a
+            bad ``safety_distance_m``.
+    """
+    if not (math.isfinite(safety_distance_m) and safety_distance_m > 0.0):
+        raise ValueError(f"safety_distance_m must be in (0, inf) m, got {safety_distance_m!r}")
+    d0 = np.asarray(d_start_m, dtype=np.float64)
+    dm = np.asarray(d_min_m, dtype=np.float64)
+    if d0.ndim != 2 or d0.shape[0] != d0.shape[1] or dm.shape != d0.shape:
+        raise ValueError(
+            f"d_start_m and d_min_m must have the same shape (N, N), got {d0.shape} and {dm.shape}"
+        )
+    off = ~np.eye(d0.shape[0], dtype=bool)
+    if np.isnan(d0[off]).any() or np.isnan(dm[off]).any():
+        raise ValueError("d_start_m and d_min_m must not hold NaN off the diagonal")
+    if d0.shape[0] < 2:
+        return 0.0
+    owed = np.minimum(d0[off], safety_distance_m)
+    return float(max(0.0, np.max(owed - dm[off])))
 
 
 def _pairs_below(positions_world: np.ndarray, distance_m: float, name: str) -> np.ndarray:

@@ -15,11 +15,24 @@ key                         meaning
 ``collision_episodes``      episodes with at least one collision event
 ``collision_seeds``         their seeds (rerun one with the same case and that seed)
 ``violation_events``        D_s violation events (``metrics["safety_violations_total"]``)
+``violation_events_after_start``  the D_s events after the start: ``violation_events``
+                            less the pairs already inside D_s at the start (the env counts
+                            those as events at ``reset``). A packed start's pairs are
+                            inside D_s from the first step; this counts only a pair entering
+                            D_s during the episode (also one that started inside, left and
+                            came back)
 ``violation_robot_steps``   robot-steps in which the robot is closer than D_s to some teammate
                             (ground truth ``env.unwrapped.poses``, after each step)
 ``min_distance_m``          smallest pairwise centre distance over all episodes (m),
                             ``metrics["min_distance_episode"]``, the start included;
                             None for a one-robot team (no pair; the env's metric is inf)
+``start_min_distance_m``    smallest pairwise centre distance at the start over all episodes
+                            (m); None for a one-robot team
+``max_encroachment_m``      how much closer than it was owed any pair came, the largest over
+                            all episodes (m): per pair ``min(start distance, D_s)`` less its
+                            smallest distance (:func:`fov_marl.metrics.pair_encroachment`).
+                            0 when every pair that started outside D_s kept D_s and every
+                            packed pair kept its start distance; None for a one-robot team
 ``robot_steps``             robot-steps run (Σ over steps of the live robots)
 ``intervention_rate``       fraction of robot-steps with ``infos[a]["safety/intervened"]``
 ``mean_action_change``      mean over robot-steps of ‖u − u*‖₂ in action units (the
@@ -116,7 +129,7 @@ from fov_marl.adversaries import (
 )
 from fov_marl.infos import SAFETY_CAUSES, cause_counts, metrics_of, safety_of
 from fov_marl.jsonio import write_json
-from fov_marl.metrics import chatter_flips
+from fov_marl.metrics import chatter_flips, pair_encroachment, pairwise_distances_batch
 from fov_marl.stress_checkpoint import (
     CHECKPOINT_FORMAT,
     append_episode,
@@ -321,11 +334,13 @@ def run_stress_episode(
 
     Returns:
         ``{"seed", "steps", "robot_steps", "collisions", "first_collision_step",
-        "violation_events", "violation_robot_steps", "min_distance_m", "intervened",
-        "action_change_sum", "fallbacks", "statuses", "chatter_events",
+        "violation_events", "violation_events_after_start", "violation_robot_steps",
+        "min_distance_m", "start_min_distance_m", "encroachment_m", "intervened",
+        "action_change_sum", "fallbacks", "statuses", "cause_counts", "chatter_events",
         "filter_chatter_events"}`` (the filter
         entries are None when unfiltered; ``first_collision_step`` None when there was
-        none; ``min_distance_m`` None for a one-robot team, which has no pair).
+        none; the three distances None for a one-robot team, which has no pair;
+        ``encroachment_m`` is :func:`fov_marl.metrics.pair_encroachment` of the episode).
 
     Raises:
         ValueError: a bad case, seed, steps or on_step (naming it).
@@ -342,12 +357,16 @@ def run_stress_episode(
     adversary.reset(seed=int(np.random.SeedSequence([seed, _POLICY_STREAM]).generate_state(1)[0]))
     d_s = base.config.safety_distance_m
     metrics = metrics_of(next(iter(infos.values())))
+    start_events = int(metrics["safety_violations_total"])  # the pairs inside D_s at reset
+    n = base.config.n_agents
+    d_start = pairwise_distances_batch(base.poses[:, :2])  # (N, N), the start
+    np.fill_diagonal(d_start, np.inf)
+    d_min = d_start.copy()  # (N, N): each pair's smallest distance so far
     n_steps = robot_steps = viol_rs = intervened = fallbacks = 0
     du_sum = 0.0
     first_collision = None
     statuses: dict[str, int] = {}
     causes = np.zeros(len(SAFETY_CAUSES), dtype=np.int64)
-    n = base.config.n_agents
     applied: list[np.ndarray] = []  # (N, 3) per step, NaN for robots no longer live
     nominal: list[np.ndarray] = []  # the policy's own actions, the same layout
     while env.agents:
@@ -370,10 +389,10 @@ def run_stress_episode(
         metrics = metrics_of(next(iter(infos.values())))
         if first_collision is None and metrics["collisions_total"] > 0:
             first_collision = n_steps
-        if base.config.n_agents > 1:
-            p = base.poses[:, :2]
-            d = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=-1)
+        if n > 1:
+            d = pairwise_distances_batch(base.poses[:, :2])  # as the env's metrics
             np.fill_diagonal(d, np.inf)
+            np.minimum(d_min, d, out=d_min)
             live = np.array([base.agent_name_mapping[a] for a in infos], dtype=np.int64)
             viol_rs += int(np.sum(d[live].min(axis=1) < d_s))
         if case.filtered:
@@ -400,8 +419,11 @@ def run_stress_episode(
         "collisions": int(metrics["collisions_total"]),
         "first_collision_step": first_collision,
         "violation_events": int(metrics["safety_violations_total"]),
+        "violation_events_after_start": int(metrics["safety_violations_total"]) - start_events,
         "violation_robot_steps": viol_rs,
         "min_distance_m": float(metrics["min_distance_episode"]) if n > 1 else None,
+        "start_min_distance_m": float(d_start.min()) if n > 1 else None,
+        "encroachment_m": pair_encroachment(d_start, d_min, d_s) if n > 1 else None,
         "intervened": intervened if case.filtered else None,
         "action_change_sum": du_sum if case.filtered else None,
         "fallbacks": fallbacks if case.filtered else None,
@@ -436,9 +458,17 @@ def _aggregate(case: StressCase, eps: list[dict[str, Any]], steps: int) -> dict[
         "collision_episodes": sum(e["collisions"] > 0 for e in eps),
         "collision_seeds": [e["seed"] for e in eps if e["collisions"] > 0],
         "violation_events": sum(e["violation_events"] for e in eps),
+        "violation_events_after_start": sum(e["violation_events_after_start"] for e in eps),
         "violation_robot_steps": sum(e["violation_robot_steps"] for e in eps),
         "min_distance_m": min(
             (e["min_distance_m"] for e in eps if e["min_distance_m"] is not None), default=None
+        ),
+        "start_min_distance_m": min(
+            (e["start_min_distance_m"] for e in eps if e["start_min_distance_m"] is not None),
+            default=None,
+        ),
+        "max_encroachment_m": max(
+            (e["encroachment_m"] for e in eps if e["encroachment_m"] is not None), default=None
         ),
         "intervention_rate": None,
         "mean_action_change": None,
@@ -700,8 +730,10 @@ STRESS_COLUMNS: tuple[tuple[str, str], ...] = (
     ("coll", "collisions"),
     ("coll_eps", "collision_episodes"),
     ("Ds_events", "violation_events"),
+    ("Ds_new", "violation_events_after_start"),
     ("Ds_rsteps", "violation_robot_steps"),
     ("min_d_m", "min_distance_m"),
+    ("encroach_m", "max_encroachment_m"),
     ("interv", "intervention_rate"),
     ("mean_du", "mean_action_change"),
     ("fallback", "fallbacks"),
@@ -713,7 +745,7 @@ STRESS_COLUMNS: tuple[tuple[str, str], ...] = (
 
 def format_stress_table(rows: Sequence[Mapping[str, Any]]) -> str:
     """Plain-text table of :func:`run_stress` rows (one line per case), then a summary line."""
-    from fov_marl.tables import format_table
+    from fov_marl.tables import format_cell, format_table
 
     def cell(key: str, v: Any, row: Mapping[str, Any]) -> Any:
         if key == "filtered":  # "yes", or the particle initialisation when not the default
@@ -732,7 +764,19 @@ def format_stress_table(rows: Sequence[Mapping[str, Any]]) -> str:
     table = format_table(body, [h for h, _ in STRESS_COLUMNS])
     bad = sum(1 for r in rows if r.get("collisions", 0) > 0)
     eps = sum(int(r.get("episodes", 0)) for r in rows)
-    return f"{table}\n\ncases with collisions: {bad} / {len(rows)} ({eps} episodes)"
+    new = sum(int(r.get("violation_events_after_start") or 0) for r in rows)
+    new_cases = sum(1 for r in rows if r.get("violation_events_after_start"))
+    enc = max(
+        (r["max_encroachment_m"] for r in rows if r.get("max_encroachment_m") is not None),
+        default=None,
+    )
+    tail = (
+        f"\nD_s entered after the start: {new} event{'s' * (new != 1)} in {new_cases} "
+        f"case{'s' * (new_cases != 1)}"
+    )
+    if enc is not None:
+        tail += f"; closest below what a pair was owed (min(start, D_s)): {format_cell(enc)} m"
+    return f"{table}\n\ncases with collisions: {bad} / {len(rows)} ({eps} episodes){tail}"
 
 
 # --------------------------------------------------------------------- CLI
@@ -821,8 +865,11 @@ def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="adversarial sweep of the safety filter: table of collisions, D_s, interventions",
         description=(
             "Run adversarial policies (fov_marl.adversaries) against SafetyFilterWrapper "
-            "and print, per case, collision events, D_s violations, the minimum distance, "
-            "the intervention rate and the mean action change. Without grid flags: the "
+            "and print, per case, collision events, D_s violations (all, and those after the "
+            "start: a packed start's pairs are inside D_s from the first step), the minimum "
+            "distance, how far any pair came inside what it was owed (min(its start "
+            "distance, D_s)), the intervention rate and the mean action change. Without grid "
+            "flags: the "
             "quick subset (--quick). --full, or any of --adversaries/--n-agents/--fov-deg/"
             "--starts without --quick: the product of the given lists, the full grid "
             "filling the others. --quick with grid flags filters the quick subset."

@@ -35,7 +35,8 @@ CHECKPOINT_FORMAT = "fov_marl.stress/episode-1"
 EPISODE_KEYS = frozenset(
     (
         "seed steps robot_steps collisions first_collision_step violation_events "
-        "violation_robot_steps min_distance_m intervened action_change_sum fallbacks "
+        "violation_events_after_start violation_robot_steps min_distance_m "
+        "start_min_distance_m encroachment_m intervened action_change_sum fallbacks "
         "statuses cause_counts chatter_events filter_chatter_events"
     ).split()
 )
@@ -120,6 +121,9 @@ def record_problem(
         return "its record's seed or steps differ from the line's"
     counts = ("robot_steps", "collisions", "violation_events", "violation_robot_steps")
     bad = [k for k in (*counts, "chatter_events") if not _nonneg_int(rec[k])]
+    after = rec["violation_events_after_start"]  # the events less those of the start
+    if not (_nonneg_int(after) and ("violation_events" in bad or after <= rec["violation_events"])):
+        bad.append("violation_events_after_start")
     if (
         "robot_steps" not in bad
         and _nonneg_int(n_agents)
@@ -135,8 +139,12 @@ def record_problem(
             fine = collided and _nonneg_int(fcs) and 1 <= fcs <= n_steps
         if not fine:
             bad.append("first_collision_step")
-    if rec["min_distance_m"] is not None and not _finite_nonneg(rec["min_distance_m"]):
-        bad.append("min_distance_m")
+    for k in ("min_distance_m", "start_min_distance_m", "encroachment_m"):
+        # all three None for a one-robot team (no pair), all three numbers otherwise
+        if (rec[k] is None) != (rec["min_distance_m"] is None) or (
+            rec[k] is not None and not _finite_nonneg(rec[k])
+        ):
+            bad.append(k)
     fields = ("intervened", "fallbacks", "filter_chatter_events", "action_change_sum")
     if filtered is not True:
         bad += [k for k in (*fields, "statuses", "cause_counts") if rec[k] is not None]

@@ -22,6 +22,7 @@ from fov_marl.metrics import (
     min_pairwise_distance,
     optimal_eta,
     optimal_eta_solution,
+    pair_encroachment,
     pairwise_distances,
     pairwise_distances_batch,
     per_robot_counts,
@@ -314,6 +315,55 @@ def test_separation_bad_input():
     with pytest.raises(ValueError, match="robot indices"):
         per_robot_counts(np.array([[0, 5]]), 3)
     assert per_robot_counts(np.zeros((0, 2), dtype=int), 3).tolist() == [0, 0, 0]
+
+
+def _encroachment_by_hand(trajectory: np.ndarray, d_s: float) -> float:
+    """The obviously-correct reference: every pair, every step, in Python loops."""
+    n = trajectory.shape[1]
+    worst = 0.0
+    for i in range(n):
+        for j in range(n):
+            if i == j:
+                continue
+            start = math.dist(trajectory[0, i], trajectory[0, j])
+            closest = min(math.dist(p[i], p[j]) for p in trajectory)
+            worst = max(worst, min(start, d_s) - closest)
+    return worst
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    n=st.integers(0, 5),
+    t=st.integers(1, 5),
+    d_s=st.floats(0.1, 5.0),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_pair_encroachment_against_a_loop(n, t, d_s, seed):
+    """Trajectories of N robots over T samples (the first is the start), drawn in a
+    5 m square so that pairs start both inside and outside D_s and close or part."""
+    traj = np.random.default_rng(seed).uniform(0.0, 5.0, size=(t, n, 2))
+    d = pairwise_distances_batch(traj)  # (T, N, N)
+    got = pair_encroachment(d[0], d.min(axis=0), d_s)
+    assert got >= 0.0
+    assert got == pytest.approx(max(0.0, _encroachment_by_hand(traj, d_s)), abs=1e-12)
+
+
+def test_pair_encroachment_owes_packed_pairs_their_start_and_others_d_s():
+    d_s = 2.0
+    packed = np.array([[0.0, 1.1], [1.1, 0.0]])
+    assert pair_encroachment(packed, packed, d_s) == 0.0  # held its 1.1 m: nothing owed
+    assert pair_encroachment(packed, packed - 0.1, d_s) == pytest.approx(0.1)  # closed
+    apart = np.array([[0.0, 3.0], [3.0, 0.0]])
+    assert pair_encroachment(apart, apart - 0.5, d_s) == 0.0  # 2.5 m: kept D_s
+    assert pair_encroachment(apart, apart - 1.5, d_s) == pytest.approx(0.5)  # 1.5 m < D_s
+    # the diagonal (0 or inf, as callers fill it) is not a pair
+    assert pair_encroachment(np.full((1, 1), np.inf), np.zeros((1, 1)), d_s) == 0.0
+    with pytest.raises(ValueError, match="safety_distance_m"):
+        pair_encroachment(packed, packed, 0.0)
+    with pytest.raises(ValueError, match="same shape"):
+        pair_encroachment(packed, np.zeros((3, 3)), d_s)
+    with pytest.raises(ValueError, match="NaN"):
+        pair_encroachment(packed, np.array([[0.0, np.nan], [np.nan, 0.0]]), d_s)
 
 
 # ----------------------------------------------------------------------------- time to η

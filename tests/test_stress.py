@@ -26,6 +26,7 @@ from fov_marl.stress import (
     run_stress,
     run_stress_episode,
 )
+from fov_marl.tables import format_cell
 
 TINY = [
     StressCase("straight", 2, 120.0, "head_on_pair", filtered=False),
@@ -101,6 +102,7 @@ def test_episode_matches_the_env_metrics_and_the_safety_infos():
     adv.reset(seed=0)  # charge_centre draws nothing: the policy seed does not matter
     interv = viol = 0
     du, applied, nominal = [], [], []
+    path = [env.unwrapped.poses[:, :2].copy()]  # the start, then one entry per step
     while env.agents:
         obs, _, _, _, infos = env.step(adv.act(obs))
         applied.append([safety_of(infos[a])["applied_action"] for a in env.possible_agents])
@@ -116,6 +118,7 @@ def test_episode_matches_the_env_metrics_and_the_safety_infos():
         d = np.linalg.norm(p[:, None] - p[None], axis=-1)
         np.fill_diagonal(d, np.inf)
         viol += int(np.sum(d.min(1) < cfg.safety_distance_m))
+        path.append(p.copy())
     m = metrics_of(infos["robot_0"])
     assert rec["collisions"] == m["collisions_total"]
     assert rec["violation_events"] == m["safety_violations_total"]
@@ -123,6 +126,16 @@ def test_episode_matches_the_env_metrics_and_the_safety_infos():
     assert rec["intervened"] == interv and rec["violation_robot_steps"] == viol
     assert rec["action_change_sum"] == pytest.approx(sum(du))
     assert rec["robot_steps"] == 90
+    # the start and each pair's due (min(start distance, D_s)), by hand
+    d_s = cfg.safety_distance_m
+    pairs = [(i, j) for i in range(3) for j in range(i + 1, 3)]
+    start = {q: float(np.linalg.norm(path[0][q[0]] - path[0][q[1]])) for q in pairs}
+    closest = {q: min(float(np.linalg.norm(x[q[0]] - x[q[1]])) for x in path) for q in pairs}
+    assert rec["start_min_distance_m"] == pytest.approx(min(start.values()), abs=1e-12)
+    inside_at_start = sum(v < d_s for v in start.values())
+    assert rec["violation_events_after_start"] == m["safety_violations_total"] - inside_at_start
+    due = max(min(start[q], d_s) - closest[q] for q in pairs)
+    assert rec["encroachment_m"] == pytest.approx(max(due, 0.0), abs=1e-12)
 
     # period-2 flips of the applied components, counted by hand
     def by_hand(actions):
@@ -133,6 +146,33 @@ def test_episode_matches_the_env_metrics_and_the_safety_infos():
     assert rec["chatter_events"] == int(flips.sum())
     # the filter's own: the applied component flips where the nominal one does not
     assert rec["filter_chatter_events"] == int((flips & ~by_hand(nominal)).sum())
+
+
+def test_encroachment_and_new_ds_events_tell_a_packed_start_from_a_closing_pair():
+    """A packed start's pairs are inside D_s from the first step, so its D_s events are
+    the start itself; ``violation_events_after_start`` and ``encroachment_m`` count only
+    what the episode did. Unfiltered adversaries close (a head-on pair 2.6 m apart
+    collides; a packed corner team charging its centre closes below its 1.1 m spacing);
+    behind the filter the same packed team holds it."""
+    head_on = run_stress_episode(StressCase("straight", 2, 120.0, "head_on_pair", False), 0, 40)
+    assert head_on["collisions"] > 0 and head_on["start_min_distance_m"] > 2.0
+    assert head_on["violation_events_after_start"] == head_on["violation_events"] >= 1
+    # owed D_s = 2 m, came within contact (< 2 robot radii)
+    assert head_on["encroachment_m"] == pytest.approx(2.0 - head_on["min_distance_m"])
+    packed = StressCase("charge_centre", 4, 120.0, "corner", False)
+    free = run_stress_episode(packed, 0, 40)
+    assert free["start_min_distance_m"] == pytest.approx(1.1)
+    assert free["violation_events"] >= 4  # the start's pairs inside D_s
+    assert free["encroachment_m"] > 0.05  # closed on its 1.1 m spacing ...
+    assert free["collisions"] > 0 and free["violation_events_after_start"] == 0  # ... in D_s
+    held = run_stress_episode(replace(packed, filtered=True), 0, 40)
+    assert held["violation_events"] >= 4 and held["violation_events_after_start"] == 0
+    assert held["encroachment_m"] < 1e-6 and held["collisions"] == 0
+    [row] = run_stress([packed, replace(packed, filtered=True)][1:], episodes=1, steps=40)
+    assert row["max_encroachment_m"] == held["encroachment_m"]
+    assert row["violation_events_after_start"] == 0
+    table = format_stress_table([row])
+    assert "encroach_m" in table and "D_s entered after the start: 0 events in 0 cases" in table
 
 
 def test_filter_chatter_tells_the_filters_flips_from_the_policys():
@@ -249,7 +289,15 @@ def test_format_stress_table():
     # the filtered head-on pair is changed mostly for its neighbour's rows
     top = max(rows[1]["intervention_causes"], key=rows[1]["intervention_causes"].get)
     assert top == "neighbour" and " neighbour 1.00 " in lines[3]  # every step
-    assert lines[-1].startswith("cases with collisions: 1 / 2")
+    assert lines[-2].startswith("cases with collisions: 1 / 2")
+    # the unfiltered pair drives into D_s from 2.6 m apart; the filtered one keeps it
+    assert rows[0]["violation_events_after_start"] == 1
+    assert rows[1]["violation_events_after_start"] == 0 == rows[1]["max_encroachment_m"]
+    enc = format_cell(rows[0]["max_encroachment_m"])  # owed D_s, came within contact
+    assert lines[-1] == (
+        f"D_s entered after the start: 1 event in 1 case; closest below what a pair was "
+        f"owed (min(start, D_s)): {enc} m"
+    )
 
 
 def test_cmd_stress_prints_a_table_and_writes_json(tmp_path, capsys):
