@@ -480,15 +480,19 @@ def as_real_vector(name: str, value: Any, n: int) -> np.ndarray | str:
 
 
 def holds_bool(value: Any) -> bool:
-    """True when a list or tuple (nested) holds a ``bool`` / ``np.bool_`` element.
+    """True when a list or tuple (nested) holds a ``bool`` / ``np.bool_`` element or a
+    boolean array (``[np.ones((2, 3), bool), np.zeros((2, 3))]``, ``[np.array(True), 0, 0]``).
 
     ``np.asarray([True, 0.5, 0])`` is a float array: the bools of a mixed sequence
-    would pass a dtype check. Arrays are not walked (their dtype says it).
+    would pass a dtype check. An array is not walked (its dtype says it): only its dtype
+    is read, at the top level or as an element of a sequence.
     """
     if not isinstance(value, list | tuple):
         return False
     return any(
-        isinstance(e, bool | np.bool_) or (isinstance(e, list | tuple) and holds_bool(e))
+        isinstance(e, bool | np.bool_)
+        or (isinstance(e, np.ndarray) and e.dtype.kind == "b")
+        or (isinstance(e, list | tuple) and holds_bool(e))
         for e in value
     )
 

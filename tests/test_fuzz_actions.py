@@ -72,6 +72,7 @@ INVALID: list[Any] = [
     np.array([True, False, True]),
     [True, 0.5, 0],  # red team 4: a bool among numbers (np.asarray makes it float)
     (0.1, np.bool_(False), 0.0),
+    [np.array(True), 0.0, 0.0],  # red team 25: a 0-d bool array among numbers
     {"vx": 1.0, "vy": 0.0, "w": 0.0},
     {1.0, 2.0, 3.0},
     [[1.0], [0.0, 0.0], [0.0]],

@@ -261,6 +261,9 @@ def test_bad_config_names_the_field():
         (np.zeros(3), "shape"),
         ([[["a", "b", "c"]] * 3] * 2, "dtype"),
         (np.ones((2, 3, 3), dtype=bool), "dtype"),
+        # red team 25: a copy's rows as a bool array in a list (np.asarray made them 1.0)
+        ([np.ones((3, 3), dtype=bool), np.zeros((3, 3))], "bool"),
+        ([[[np.array(True), 0.0, 0.0]] * 3, [[0.0] * 3] * 3], "bool"),
         (np.ones((2, 3, 3), dtype=complex), "dtype"),
         (np.full((2, 3, 3), None), "dtype"),
         ([[[0, 0]] * 3] * 2 + [[[0, 0, 0]] * 3], "actions"),
