@@ -64,8 +64,12 @@ Ctrl-C reaches the parent only. A call it interrupts leaves the pipes in order (
 message is sent and read whole, with SIGINT and SIGALRM handled right after it, and
 answers carry their command's number, so the next call discards stale ones): the env
 can step on or be closed (``fov-marl train`` saves its model on Ctrl-C); the shards
-that had received an interrupted ``step`` have stepped. ``close()`` is idempotent; the
-env is a context manager.
+that had received an interrupted ``step`` have stepped. The same holds for whatever a
+SIGINT or SIGALRM handler raises (an alarm-based timeout's ``TimeoutError``, any
+exception): the caller gets that exception, never a "worker has exited" for it, and the
+env steps on; only a worker's own failure makes it wait for ``reset()``. ``close()``
+is idempotent (a handler's exception during it is raised once the workers are stopped);
+the env is a context manager.
 """
 
 from __future__ import annotations
@@ -232,12 +236,73 @@ _DEFERRED_SIGNALS = tuple(
 )
 
 
+#: the attribute :func:`_run_handler` sets on an exception a signal handler raised
+_FROM_SIGNAL = "_fov_marl_from_signal"
+
+
+def _run_handler(handler: Callable[[int, Any], Any], signum: int, frame: Any) -> None:
+    """Call a signal handler of :data:`_DEFERRED_SIGNALS`; an exception it raises is
+    tagged (:func:`from_signal`) and raised on. A handler may raise anything, also an
+    ``OSError`` (``TimeoutError`` is one): the tag tells it from a pipe's own error."""
+    try:
+        handler(signum, frame)
+    except BaseException as exc:
+        with contextlib.suppress(AttributeError, TypeError):  # a class with __slots__
+            setattr(exc, _FROM_SIGNAL, True)
+        raise
+
+
+class _PipeClosed(Exception):
+    """A worker's pipe is closed or broken (the worker has exited): raised only where a
+    pipe is read or written, so a signal handler's ``OSError`` is never taken for it."""
+
+
+#: the attribute set on the exceptions that mean a worker failed (it raised, or exited)
+_FROM_WORKER = "_fov_marl_from_worker"
+
+
+def _worker_failure(exc: BaseException) -> BaseException:
+    """``exc``, tagged as a worker's failure (:meth:`SubprocVectorEnv._broadcast` then
+    refuses to step until ``reset()``)."""
+    setattr(exc, _FROM_WORKER, True)
+    return exc
+
+
+def from_signal(exc: BaseException) -> bool:
+    """True when ``exc`` was raised by a signal handler while this module waited on or
+    used a pipe (Ctrl-C, an alarm-based timeout), not by the pipe or a worker."""
+    return bool(getattr(exc, _FROM_SIGNAL, False))
+
+
+@contextlib.contextmanager
+def _signals_tagged() -> Iterator[None]:
+    """Run the block (an interruptible wait) with the Python handlers of
+    :data:`_DEFERRED_SIGNALS` wrapped by :func:`_run_handler`, so an exception one of them
+    raises inside the block is told from the pipe's errors. Main thread only (elsewhere
+    no handler runs)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    saved: list[tuple[int, Any]] = []
+    for sig in _DEFERRED_SIGNALS:
+        old = signal.getsignal(sig)
+        if callable(old):
+            saved.append((sig, old))
+            signal.signal(sig, partial(_run_handler, old))
+    try:
+        yield
+    finally:
+        for sig, old in saved:
+            signal.signal(sig, old)
+
+
 @contextlib.contextmanager
 def _signals_deferred() -> Iterator[None]:
     """Run the block with the Python handlers of :data:`_DEFERRED_SIGNALS` held back: a
-    signal that arrives meanwhile is handled (e.g. ``KeyboardInterrupt`` raised) right
-    after the block. Only the main thread runs Python signal handlers, so elsewhere
-    nothing is deferred (nothing can interrupt the block there)."""
+    signal that arrives meanwhile is handled (e.g. ``KeyboardInterrupt`` raised, tagged
+    by :func:`_run_handler`) right after the block. Only the main thread runs Python
+    signal handlers, so elsewhere nothing is deferred (nothing can interrupt the block
+    there)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -254,8 +319,7 @@ def _signals_deferred() -> Iterator[None]:
         for sig, old in saved:
             signal.signal(sig, old)
         for signum, frame in caught:
-            handler = dict(saved)[signum]
-            handler(signum, frame)
+            _run_handler(dict(saved)[signum], signum, frame)
 
 
 def _concat(parts: list[Any], key: str) -> Any:
@@ -396,9 +460,18 @@ class SubprocVectorEnv:
         (Ctrl-C) and leaves nothing half read: the message is read with the signals
         deferred (:func:`_signals_deferred`), together with the count of answers."""
         conn = self._conns[w]
-        conn.poll(None)  # interruptible; consumes nothing
-        with _signals_deferred():
-            msg = conn.recv()
+        with _signals_tagged():
+            try:
+                conn.poll(None)  # interruptible; consumes nothing
+            except (EOFError, OSError) as exc:
+                if from_signal(exc):  # e.g. a timeout's TimeoutError: the caller's
+                    raise
+                raise _PipeClosed from exc
+        with _signals_deferred():  # no handler runs in here: an error is the pipe's
+            try:
+                msg = conn.recv()
+            except (EOFError, OSError) as exc:
+                raise _PipeClosed from exc
             self._answered[w] = msg[0]
         return msg
 
@@ -410,7 +483,7 @@ class SubprocVectorEnv:
             while self._answered[w] < self._sent[w]:
                 try:
                     self._next_answer(w)
-                except (EOFError, OSError):
+                except _PipeClosed:
                     break
 
     def _broadcast(self, cmd: str, args: list[Any]) -> list[Any]:
@@ -425,33 +498,39 @@ class SubprocVectorEnv:
         self._check_open()
         blobs = []
         for arg in args:
-            try:
-                blobs.append(ForkingPickler.dumps((cmd, arg)))
-            except Exception as exc:  # noqa: BLE001 - any pickling failure
-                raise ValueError(
-                    f"the arguments of {cmd!r} must be picklable to reach the worker "
-                    f"processes: {type(exc).__name__}: {exc}"
-                ) from None
+            with _signals_tagged():  # the whole try: every handler's exception is tagged
+                try:
+                    blobs.append(ForkingPickler.dumps((cmd, arg)))
+                except Exception as exc:  # noqa: BLE001 - any pickling failure
+                    if from_signal(exc):  # not the pickler's: a timeout's, the caller's
+                        raise
+                    raise ValueError(
+                        f"the arguments of {cmd!r} must be picklable to reach the worker "
+                        f"processes: {type(exc).__name__}: {exc}"
+                    ) from None
         self._drain()
         self._seq += 1
         seq = self._seq
         try:
             for w, blob in enumerate(blobs):
-                try:
-                    with _signals_deferred():
+                with _signals_deferred():  # no handler runs in here: an error is the pipe's
+                    try:
                         self._conns[w].send((seq, bytes(blob)))
-                        self._sent[w] = seq
-                except (BrokenPipeError, OSError):
-                    raise RuntimeError(
-                        f"worker {w} of the SubprocVectorEnv has exited "
-                        f"(exit code {self._procs[w].exitcode})"
-                    ) from None
+                    except OSError:
+                        raise _worker_failure(
+                            RuntimeError(
+                                f"worker {w} of the SubprocVectorEnv has exited "
+                                f"(exit code {self._procs[w].exitcode})"
+                            )
+                        ) from None
+                    self._sent[w] = seq
             return self._recv_all(seq)
-        except Exception:
-            if cmd in ("step", "reset"):
+        except Exception as exc:
+            if cmd in ("step", "reset") and getattr(exc, _FROM_WORKER, False):
                 # a shard that failed (a finished copy that could not reset) left the
-                # others moved: nothing steps on until reset(), as in FovVectorEnv. A
-                # Ctrl-C (KeyboardInterrupt) is not this: the protocol keeps them in step.
+                # others moved: nothing steps on until reset(), as in FovVectorEnv. An
+                # exception of a signal handler (Ctrl-C, an alarm-based timeout) is not
+                # this: the protocol keeps the shards in step.
                 self._needs_reset = True
                 self._not_ready = f"the last {cmd}() failed in a worker; call reset()"
             raise
@@ -467,7 +546,7 @@ class SubprocVectorEnv:
                     got, status, payload = self._next_answer(w)
                     if got == seq:
                         break
-            except (EOFError, OSError):
+            except _PipeClosed:
                 self._answered[w] = self._sent[w]  # nothing more will come
                 self._procs[w].join(timeout=1.0)
                 hint = (
@@ -490,7 +569,7 @@ class SubprocVectorEnv:
                 )
             results.append(payload)
         if error is not None:
-            raise error
+            raise _worker_failure(error)
         return results
 
     def _all(self, cmd: str, arg: Any = None) -> list[Any]:
@@ -615,25 +694,44 @@ class SubprocVectorEnv:
             return
         self._closed = True
         blob = bytes(ForkingPickler.dumps(("close", None)))
+        # a signal handler's exception (a timeout) during the close is raised once the
+        # workers are stopped and the pipes closed
+        pending: BaseException | None = None
         for conn in self._conns:
             try:
-                with _signals_deferred():
-                    conn.send((-1, blob))
-            except (BrokenPipeError, OSError):
-                pass
+                with _signals_deferred():  # no handler runs in here: an error is the pipe's
+                    with contextlib.suppress(OSError):
+                        conn.send((-1, blob))
+            except BaseException as exc:  # a deferred handler's
+                pending = pending or exc
         for conn, proc in zip(self._conns, self._procs, strict=True):
             try:  # stale answers first, then the close's (or the end of the pipe)
-                while conn.poll(CLOSE_TIMEOUT_S):
+                while True:
+                    with _signals_tagged():
+                        try:
+                            ready = conn.poll(CLOSE_TIMEOUT_S)
+                        except (EOFError, OSError) as exc:
+                            if from_signal(exc):
+                                raise
+                            ready = False
+                    if not ready:
+                        break
                     with _signals_deferred():
-                        if conn.recv()[0] == -1:
-                            break
-            except (EOFError, OSError):
-                pass
+                        try:
+                            last = conn.recv()[0] == -1
+                        except (EOFError, OSError):
+                            last = True
+                    if last:
+                        break
+            except BaseException as exc:  # a signal handler's
+                pending = pending or exc
             proc.join(timeout=CLOSE_TIMEOUT_S)
             if proc.is_alive():
                 proc.terminate()
                 proc.join(timeout=1.0)
             conn.close()
+        if pending is not None:
+            raise pending
 
     def __copy__(self) -> SubprocVectorEnv:
         raise TypeError("a SubprocVectorEnv cannot be copied: it owns its worker processes")
