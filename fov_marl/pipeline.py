@@ -810,6 +810,8 @@ class PfCbfPipeline:
         par = self.controller_params
         if not self.use_cbf or self.estimates != "tracker" or par.blind_travel_m <= 0.0:
             return u_star
+        if self.n <= 1:  # a one-robot team: no neighbour to meet blind, no budget rows
+            return u_star
         trigger = par.look_fraction * par.blind_travel_m - _LOOK_SLACK_M
         if par.look_persistence_deg > 0.0:
             # the early look only for a u* that keeps its course (Σ_w, so the robot's own

@@ -500,6 +500,32 @@ def test_filter_still_budgets_a_robot_whose_neighbour_can_be_near():
     assert (first_kept + 1) * 0.2 == pytest.approx(14.0 - 3.4, abs=0.21)
 
 
+@pytest.mark.parametrize("fov", [45.0, 120.0, 360.0])
+def test_a_lone_robot_is_changed_only_by_the_walls(fov):
+    """A one-robot team has no neighbour to meet blind: no budget rows, no look turn
+    (red team 26: at 120° the budget and the look had cut a sideways drive in mid-arena
+    from 0.98 to 0.08 m/s from the third step). It drives 15 steps sideways untouched;
+    on towards the wall, the wall rows still slow it there (r = 0.5 m)."""
+    env = SafetyFilterWrapper(
+        fov_coverage_v0.parallel_env(
+            n_agents=1, fov_deg=fov, max_cycles=80, initial_poses=[[20.0, 30.0, 0.0]]
+        )
+    )
+    env.reset(seed=0)
+    side = {"robot_0": np.array([0.0, 1.0, 0.0], np.float32)}
+    for _ in range(15):
+        _, _, _, _, infos = env.step(side)
+        s = safety_of(infos["robot_0"])
+        assert not s["intervened"] and s["causes"] == (), s
+    assert env.unwrapped.poses[0, 1] > 30.0 + 15 * 0.2 * 0.98 - 1e-6
+    walled = []
+    for _ in range(50):  # 6.6 m to the wall at y = 39.5, 34 steps at 0.98 m/s
+        _, _, _, _, infos = env.step(side)
+        walled.append(safety_of(infos["robot_0"])["causes"])
+    assert ("wall",) in walled
+    assert env.unwrapped.poses[0, 1] <= 40.0 - 0.5 + 1e-9
+
+
 def _look_pipe(persistence_deg: float):
     """A two-robot filter whose robot 0 has spent 0.4 m (80% of B) along every bearing."""
     env, pipe = _pair_filter(
