@@ -79,6 +79,7 @@ import numpy as np
 
 from fov_marl.config import ScenarioConfig
 from fov_marl.geometry import body_to_world, world_to_body
+from fov_marl.validation import check_seed
 
 __all__ = [
     "Adversary",
@@ -123,7 +124,7 @@ class Adversary:
     # ------------------------------------------------------------ protocol
     def reset(self, seed: int | None = None) -> None:
         """Start a new episode; same seed, same actions."""
-        self._rng = np.random.default_rng(seed)
+        self._rng = np.random.default_rng(check_seed("seed", seed))
         self.num_steps = 0
         self._reset_state()
 

@@ -100,6 +100,16 @@ def test_deterministic_under_a_seed(name):
         assert not np.array_equal(run(5), run(6))
 
 
+@pytest.mark.parametrize("name", ["random", "straight"])
+def test_reset_checks_its_seed(name):
+    """Red team 26 (the policies' reset): numpy's own message, not naming ``seed``."""
+    adv = make_adversary(name, fov_coverage_v0.parallel_env(n_agents=2))
+    for bad in (-1, 1.5, "a"):
+        with pytest.raises(ValueError, match="seed"):
+            adv.reset(seed=bad)
+    adv.reset(seed=None)
+
+
 def test_documented_behaviours():
     cfg = fov_coverage_v0.parallel_env(n_agents=2).config
     # two robots on the x axis, 4 m apart, robot 0 facing +y (the other is to its right)

@@ -90,7 +90,7 @@ from fov_marl.spaces import (
     SLOT_SIZE,
     SLOT_YAW_CS,
 )
-from fov_marl.validation import check_bool, check_real, check_real_sequence, describe
+from fov_marl.validation import check_bool, check_real, check_real_sequence, check_seed, describe
 
 __all__ = [
     "MODEL_FORMAT",
@@ -431,14 +431,22 @@ class LearnedSetPolicy:
             model (:func:`shipped_model_dir`).
 
     Raises:
-        ValueError: an unreadable or invalid model folder (:meth:`SetActorWeights.load`)
-            or an observation layout the policy cannot read.
+        ValueError: an unreadable or invalid model folder (:meth:`SetActorWeights.load`),
+            an observation layout the policy cannot read, or a vector env (the message
+            says how to run the actor on a batch); ``reset`` with a seed that is not
+            None or an integer ≥ 0.
     """
 
     def __init__(self, env: Any, path: str | os.PathLike | None = None) -> None:
         if path is not None and not isinstance(path, str | os.PathLike):
             raise ValueError(
                 f"path must be a model folder (str or os.PathLike) or None, got {describe(path)}"
+            )
+        if hasattr(env, "num_envs") or hasattr(getattr(env, "unwrapped", None), "num_envs"):
+            raise ValueError(
+                "the learned policy acts in one env (a ParallelEnv, possibly wrapped), got the "
+                f"vector env {type(env).__name__}; for B copies run its actor on the batch: "
+                "policy.model.act(obs.reshape(-1, obs.shape[-1]))"
             )
         self.model_dir = Path(path) if path is not None else shipped_model_dir()
         self.model = SetActorWeights.load(self.model_dir)
@@ -464,7 +472,7 @@ class LearnedSetPolicy:
         self._seed: int | None = None
 
     def reset(self, seed: int | None = None) -> None:
-        self._seed = seed
+        self._seed = check_seed("seed", seed)
 
     def act(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         agents = list(obs)

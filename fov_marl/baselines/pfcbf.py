@@ -57,6 +57,7 @@ from fov_marl.control import ControllerParams
 from fov_marl.envs.rendering import draw_beliefs
 from fov_marl.estimation import TrackerParams
 from fov_marl.pipeline import PfCbfPipeline
+from fov_marl.validation import check_bool, check_params, check_seed, fov_parallel_base
 
 __all__ = ["PipelinePolicy", "PFCBF_COVERAGE_DEFAULTS"]
 
@@ -127,6 +128,13 @@ class PipelinePolicy:
             particles and book the blind travel by the actions the filter applied, not
             by the policy's own (:meth:`_adopt_applied`); False (an ablation) keeps the
             policy's own, as before this option. No effect without a filter.
+
+    Raises:
+        ValueError: an env that is not a fov_marl ParallelEnv or a wrapper keeping its
+            observations (a vector env, an AEC env, ``BeliefObservationWrapper``), a
+            ``tracker_params`` / ``controller_params`` dict with a field the dataclass
+            does not have, or a non-bool ``adopt_applied`` (and the pipeline's own
+            checks of ``estimates``, ``init`` and ``controller``).
     """
 
     def __init__(
@@ -141,19 +149,21 @@ class PipelinePolicy:
         controller: str = "auto",
         adopt_applied: bool = True,
     ) -> None:
+        self.base = fov_parallel_base(
+            "a team policy", env, "a policy acts in one env; run one per copy"
+        )
         self.env = env
-        self.adopt_applied = bool(adopt_applied)
-        self.base = env.unwrapped
+        self.adopt_applied = check_bool("adopt_applied", adopt_applied)
         cfg = self.base.config
-        if isinstance(tracker_params, dict):
-            tracker_params = TrackerParams(**tracker_params)
-        if use_cbf and estimates == "tracker" and cfg.scenario == "coverage":
-            if controller_params is None:
-                controller_params = dict(PFCBF_COVERAGE_DEFAULTS)
-            elif isinstance(controller_params, dict):
-                controller_params = {**PFCBF_COVERAGE_DEFAULTS, **controller_params}
-        if isinstance(controller_params, dict):
-            controller_params = ControllerParams(**controller_params)
+        tracker_params = check_params("tracker_params", tracker_params, TrackerParams)
+        defaults = (
+            PFCBF_COVERAGE_DEFAULTS
+            if use_cbf and estimates == "tracker" and cfg.scenario == "coverage"
+            else None
+        )
+        controller_params = check_params(
+            "controller_params", controller_params, ControllerParams, defaults
+        )
         self.pipeline = PfCbfPipeline(
             cfg,
             tracker_params=tracker_params,
@@ -175,7 +185,7 @@ class PipelinePolicy:
         return self.pipeline.last_timings
 
     def reset(self, seed: int | None = None) -> None:
-        self._seed = seed
+        self._seed = check_seed("seed", seed)
         self._started = False
         self._sent = self._sent_rows = None
 

@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 
 from fov_marl.baselines.registry import register_policy
+from fov_marl.validation import check_seed
 
 __all__ = ["RandomPolicy"]
 
@@ -19,7 +20,7 @@ class RandomPolicy:
         self._rng = np.random.default_rng()
 
     def reset(self, seed: int | None = None) -> None:
-        self._rng = np.random.default_rng(seed)
+        self._rng = np.random.default_rng(check_seed("seed", seed))
 
     def act(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         return {

@@ -146,6 +146,7 @@ from fov_marl.validation import (
     check_keys,
     check_out_dir,
     check_real,
+    check_seed,
     check_wrapper_kwargs,
     describe,
     is_integer,
@@ -1172,7 +1173,7 @@ class LearnedPolicy:
 
     def reset(self, seed: int | None = None) -> None:
         """Start an episode; belief trackers are re-seeded from ``seed`` at the next ``act``."""
-        self._seed = seed
+        self._seed = check_seed("seed", seed)
         self._needs_reset = True
         self._last_actions = None
 

@@ -36,6 +36,46 @@ def test_unknown_policy_options_are_value_errors_listing_the_valid_ones(name, ba
     make_policy("pfcbf", env, init="uniform", controller="batched")  # valid options pass
 
 
+@pytest.mark.parametrize("name", ["pfcbf", "lloyd-pf", "ideal"])
+def test_pipeline_policy_options_are_checked_when_built(name):
+    """Red team 26: a dict with an unknown field raised TrackerParams' / ControllerParams'
+    TypeError, and ``adopt_applied="no"`` was taken as True."""
+    env = fov_coverage_v0.parallel_env(n_agents=3)
+    for key in ("tracker_params", "controller_params"):
+        with pytest.raises(ValueError, match=rf"{key} fields.*foo"):
+            make_policy(name, env, **{key: {"foo": 1}})
+        with pytest.raises(ValueError, match=key):
+            make_policy(name, env, **{key: 5})
+    with pytest.raises(ValueError, match="adopt_applied"):
+        make_policy(name, env, adopt_applied="no")
+    pol = make_policy(name, env, tracker_params={"n_particles_total": 600}, adopt_applied=False)
+    assert pol.pipeline.tracker_params.n_particles_total == 600 and pol.adopt_applied is False
+
+
+@pytest.mark.parametrize("name", ["pfcbf", "lloyd-pf", "ideal", "random", "learned"])
+def test_policy_reset_checks_its_seed(name):
+    """Red team 26: a bad seed was taken by reset and failed later (pfcbf: at the first
+    act, naming ``seeds[0]``) or raised numpy's message (random)."""
+    env = fov_coverage_v0.parallel_env(n_agents=3)
+    pol = make_policy(name, env)
+    for bad in (-1, 1.5, "a", True):
+        with pytest.raises(ValueError, match="seed"):
+            pol.reset(seed=bad)
+    pol.reset(seed=None)
+    pol.reset(seed=np.int64(3))
+    obs, _ = env.reset(seed=0)
+    assert set(pol.act(obs)) == set(obs)
+
+
+@pytest.mark.parametrize("name", ["pfcbf", "lloyd-pf", "ideal", "learned"])
+def test_policies_refuse_a_vector_env_by_name(name):
+    """Red team 26: AttributeError ('FovVectorEnv' has no 'unwrapped') or, for the learned
+    policy, TypeError ('Box' object is not callable)."""
+    venv = fov_coverage_v0.vector_env(num_envs=2, n_agents=2)
+    with pytest.raises(ValueError, match="vector env FovVectorEnv"):
+        make_policy(name, venv)
+
+
 @pytest.mark.parametrize("name", ["pfcbf", "lloyd-pf", "ideal", "random"])
 def test_policies_are_deterministic_under_a_seed(name):
     kw = dict(n_agents=4, max_steps=60, record_trajectory=True)
