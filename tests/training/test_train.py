@@ -119,6 +119,9 @@ def test_reloaded_policy_evaluates_like_a_baseline(ppo_run):
     np.testing.assert_allclose(np.stack([got[a] for a in env.possible_agents]), ref, atol=1e-6)
     raw, _ = policy.model.predict(batch, deterministic=True)
     assert not np.allclose(raw, ref)  # normalisation matters, so the check above can fail
+    for bad in (-1, 1.5, "a"):  # red team 26: reset took any seed
+        with pytest.raises(ValueError, match="seed"):
+            policy.reset(seed=bad)
 
 
 def test_reload_from_checkpoint_and_as_run_episode_factory(ppo_run):
