@@ -42,7 +42,8 @@ def make_rllib_env(env_config: Mapping[str, Any] | None = None) -> Any:
     """RLlib ``ParallelPettingZooEnv`` of a fov env built from ``env_config`` (module doc).
 
     Raises:
-        ValueError: a bad scenario, flag or config field (named).
+        ValueError: an ``env_config`` that is not a dict or None, or a bad scenario, flag
+            or config field (named).
         ImportError: ray[rllib] is not installed.
     """
     env = _parallel_env(env_config)  # validate before the (slow) ray import
@@ -52,10 +53,15 @@ def make_rllib_env(env_config: Mapping[str, Any] | None = None) -> Any:
     return ParallelPettingZooEnv(env)
 
 
-def _parallel_env(env_config: Mapping[str, Any] | None) -> Any:
+def _env_config(env_config: Mapping[str, Any] | None) -> dict[str, Any]:
+    """A plain dict copy of ``env_config`` (None: ``{}``), or ValueError if it is no dict."""
     if env_config is not None and not isinstance(env_config, Mapping):
         raise ValueError(f"env_config must be a dict or None, got {describe(env_config)}")
-    cfg = dict(env_config or {})  # RLlib's EnvContext is a dict subclass
+    return dict(env_config or {})  # RLlib's EnvContext is a dict subclass
+
+
+def _parallel_env(env_config: Mapping[str, Any] | None) -> Any:
+    cfg = _env_config(env_config)
     scenario = cfg.pop("scenario", "coverage")
     return make_parallel_env(scenario, **cfg)
 
@@ -84,7 +90,8 @@ def ppo_config(
     """An RLlib ``PPOConfig`` training one shared policy on a fov env.
 
     Args:
-        env_config: see :func:`make_rllib_env` (validated here by building one env).
+        env_config: a dict or None, see :func:`make_rllib_env` (validated here by
+            building one env).
         num_env_runners: remote sampling workers (0: sample in the driver).
         train_batch_size: env steps sampled per iteration (each gives N agent-steps;
             ``train_batch_size_per_learner``, RLlib counts env steps), in [1, inf).
@@ -95,7 +102,8 @@ def ppo_config(
         seed: RLlib's ``debugging(seed=...)``, in [0, 2^31 - 1], or None.
 
     Raises:
-        ValueError: a bad argument (named with its range) or env config field.
+        ValueError: a bad argument (named with its range), an ``env_config`` that is not
+            a dict or None, or a bad env config field.
         ImportError: ray[rllib] is not installed.
     """
     check_int("num_env_runners", num_env_runners, 0)
@@ -109,7 +117,7 @@ def ppo_config(
     hidden = tuple(check_int(f"hidden[{i}]", h, 1, 65536) for i, h in enumerate(hidden))
     if seed is not None:
         seed = check_int("seed", seed, 0, MAX_SEED, note="(or None)")
-    env_config = dict(env_config or {})
+    env_config = _env_config(env_config)
     _parallel_env(env_config).close()  # a bad field fails here, not in a worker
     require("ray.rllib", "rllib")
     from ray.rllib.algorithms.ppo import PPOConfig

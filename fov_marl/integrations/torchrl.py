@@ -30,11 +30,18 @@ from collections.abc import Mapping
 from typing import Any
 
 from fov_marl.integrations.common import make_parallel_env, require
+from fov_marl.validation import describe, fov_parallel_base
 
 __all__ = ["GROUP", "make_env", "wrap"]
 
 #: The TorchRL agent group of the fov envs.
 GROUP = "robot"
+
+_WRAP = "fov_marl.integrations.torchrl.wrap"  # for the messages
+_TAKES = (
+    "fov ParallelEnv (fov_coverage_v0.parallel_env(...) or fov_crossing_v0.parallel_env(...), "
+    "possibly wrapped)"
+)
 
 
 def wrap(parallel_env: Any, *, seed: int | None = None, device: Any = "cpu") -> Any:
@@ -47,14 +54,20 @@ def wrap(parallel_env: Any, *, seed: int | None = None, device: Any = "cpu") -> 
             specs), so a first ``env.rollout(...)``, which resets without a seed, starts
             with the *next* episode; ``env.reset(seed=seed)`` gives exactly
             ``parallel_env.reset(seed=seed)``. Reproducible either way.
-        device: torch device of the tensors.
+        device: torch device of the tensors (a ``torch.device`` or its name, ``"cpu"``;
+            None: TorchRL's default, no device).
 
     Raises:
+        ValueError: ``parallel_env`` is not a fov ParallelEnv or a ParallelEnv wrapper of
+            one (an AEC env ``env(...)``, a vector env ``vector_env(...)``, anything else:
+            the message names what was given), or ``device`` is no torch device.
         ImportError: torchrl is not installed (names the extra).
     """
+    _check_parallel_env(parallel_env)
     require("torchrl", "torchrl")
     from torchrl.envs.libs.pettingzoo import PettingZooWrapper
 
+    device = _device(device)
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message="PettingZoo in TorchRL is tested")
         return PettingZooWrapper(
@@ -64,6 +77,45 @@ def wrap(parallel_env: Any, *, seed: int | None = None, device: Any = "cpu") -> 
             seed=seed,
             device=device,
         )
+
+
+def _check_parallel_env(env: Any) -> None:
+    """``env`` must be a fov ParallelEnv or a ParallelEnv wrapper of one (ValueError).
+
+    TorchRL reads the outermost env's spaces, so, unlike the fov wrappers, any wrapper
+    (one that changes the observations too) may sit on top: only the env under them
+    (``env.unwrapped``) must be a fov env (:func:`~fov_marl.validation.fov_parallel_base`).
+    """
+    from pettingzoo import AECEnv, ParallelEnv
+
+    if isinstance(env, AECEnv):  # TorchRL would want use_mask=True for it
+        raise ValueError(
+            f"{_WRAP} takes a {_TAKES}, got the AEC env {type(env).__name__}: pass the "
+            "parallel_env(...) of the same scenario and config"
+        )
+    if hasattr(env, "num_envs"):
+        raise ValueError(
+            f"{_WRAP} takes one {_TAKES}, got the vector env {type(env).__name__}; for "
+            "B copies batch the TorchRL envs: SerialEnv(B, lambda: make_env(...))"
+        )
+    if not isinstance(env, ParallelEnv):
+        raise ValueError(f"{_WRAP} takes a {_TAKES}, got {describe(env)}")
+    fov_parallel_base(_WRAP, getattr(env, "unwrapped", env))  # e.g. another library's env
+
+
+def _device(device: Any) -> Any:
+    """``torch.device(device)`` (None stays None), or a ValueError naming ``device``."""
+    import torch
+
+    if device is None:
+        return None
+    try:
+        return torch.device(device)
+    except (RuntimeError, TypeError, ValueError):
+        raise ValueError(
+            "device must be a torch device, its name ('cpu', 'cuda:0') or None, got "
+            f"{describe(device)}"
+        ) from None
 
 
 def make_env(
@@ -90,7 +142,7 @@ def make_env(
         **config: scenario config fields (``n_agents``, ``fov_deg``, ``max_cycles``, ...).
 
     Raises:
-        ValueError: a bad scenario, flag or config field (named).
+        ValueError: a bad scenario, flag, config field or device (named).
         ImportError: torchrl is not installed.
     """
     env = make_parallel_env(

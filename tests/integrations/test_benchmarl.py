@@ -220,3 +220,64 @@ def test_task_config_changes_and_bad_task_inputs(tmp_path):
         make_experiment("mappo", on_policy_collected_frames_per_batch=0)
     exp = make_experiment("mappo", "fov_marl/crossing", save_folder=str(tmp_path), **TINY)
     assert exp.task.scenario == "crossing"
+
+
+_BAD_OVERRIDES = [
+    (
+        {"max_n_iters": -1},
+        r"experiment_overrides\['max_n_iters'\] must be an integer in \[1, inf\) \(or None\), got -1",
+    ),
+    ({"max_n_iters": 0}, r"'max_n_iters'\] must be an integer in \[1, inf\)"),
+    ({"max_n_frames": -5}, r"'max_n_frames'\] must be an integer in \[1, inf\)"),
+    ({"max_n_iters": "a"}, r"'max_n_iters'\] must be an integer .*got 'a' \(str\)"),
+    ({"max_n_iters": 2.0}, r"'max_n_iters'\] must be an integer"),
+    ({"max_n_iters": None}, "max_n_iters and max_n_frames are both None"),
+    ({"lr": "abc"}, r"'lr'\] must be a real number in \(0.0, inf\), got 'abc'"),
+    ({"lr": 0.0}, r"'lr'\] must be in \(0.0, inf\)"),
+    ({"gamma": float("nan")}, r"'gamma'\] must be finite"),
+    ({"evaluation": 1}, r"'evaluation'\] must be a bool"),
+    ({"loggers": "csv"}, r"'loggers'\] must be a list of str"),
+    (
+        {"algorithm_overrides": {"clip_epsilon": "x"}},
+        r"algorithm_overrides\['clip_epsilon'\] must be a real number in \[0.0, 1.0\]",
+    ),
+    ({"algorithm_overrides": {"lmbda": 2}}, r"'lmbda'\] must be in \[0.0, 1.0\]"),
+    (
+        {"algorithm_overrides": {"share_param_critic": "yes"}},
+        r"'share_param_critic'\] must be a bool",
+    ),
+    (
+        {"algorithm_overrides": [1]},
+        r"algorithm_overrides must be a dict of MappoConfig fields or None, got \[1\] \(list\)",
+    ),
+    ({"save_folder": 5}, "save_folder must be a directory path, got 5"),
+    ({"save_folder": "/nonexistent/fov"}, "save_folder /nonexistent/fov: no such directory"),
+]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "says"), _BAD_OVERRIDES, ids=[repr(k) for k, _ in _BAD_OVERRIDES]
+)
+def test_make_experiment_checks_override_types_and_ranges(kwargs, says):
+    """Red team 7: negative or zero budgets ran 0 iterations silently; strings, lists and
+    non-dict overrides gave TypeError / AttributeError from BenchMARL or torch."""
+    with pytest.raises(ValueError, match=says):
+        make_experiment("mappo", **kwargs)
+
+
+def test_make_experiment_override_types_come_from_benchmarls_annotations(tmp_path):
+    import numpy as np
+
+    with pytest.raises(ValueError, match=r"'target_entropy'\] must be a real number or a string"):
+        make_experiment("masac", algorithm_overrides={"target_entropy": [1]})
+    with pytest.raises(ValueError, match=r"'min_alpha'\] must be in \[0.0, inf\) \(or None\)"):
+        make_experiment("masac", algorithm_overrides={"min_alpha": -1.0})
+    tiny = {**TINY, "max_n_iters": np.int64(1), "lr": 1}  # NumPy ints and ints are fine
+    exp = make_experiment(
+        "masac",
+        save_folder=str(tmp_path),
+        algorithm_overrides={"target_entropy": -2, "min_alpha": None},
+        **tiny,
+    )
+    assert exp.config.max_n_iters == 1 and type(exp.config.max_n_iters) is int
+    assert exp.config.lr == 1.0 and exp.algorithm_config.target_entropy == -2.0

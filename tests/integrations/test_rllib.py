@@ -66,6 +66,20 @@ def test_ppo_config_shares_one_policy_and_validates():
             ppo_config({"n_agents": 2}, **kw)
 
 
+def test_ppo_config_rejects_an_env_config_that_is_not_a_dict():
+    """Red team 7: ppo_config(5) was TypeError 'int' object is not iterable, ppo_config("ab")
+    a raw dict-update ValueError, and a list of pairs was accepted as a dict."""
+    for bad, shown in [
+        (5, "5"),
+        ("ab", r"'ab' \(str\)"),
+        ([("n_agents", 2)], r"\[\('n_agents', 2\)\] \(list\)"),
+    ]:
+        with pytest.raises(ValueError, match=rf"^env_config must be a dict or None, got {shown}"):
+            ppo_config(bad)
+        with pytest.raises(ValueError, match=rf"^env_config must be a dict or None, got {shown}"):
+            make_rllib_env(bad)
+
+
 def test_example_rejects_bad_arguments_in_one_line():
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     out = subprocess.run(

@@ -108,3 +108,29 @@ def test_wrap_and_bad_arguments():
         make_env(n_agents=2, safety_filter=True, filter_kwargs={"zzz": 1})
     with pytest.raises(ValueError, match=r"unknown belief_kwargs \['q'\].*time_cap_s"):
         make_env(n_agents=2, belief=True, belief_kwargs={"q": 1})
+
+
+def test_wrap_rejects_what_is_no_fov_parallel_env():
+    """Red team 7: the AEC env gave TorchRL's 'For AEC environments you need to set
+    use_mask=True', a vector env or a string 'TypeError env is not of type expected'."""
+    from pettingzoo import ParallelEnv
+
+    from fov_marl.wrappers import BeliefObservationWrapper
+
+    class Foreign(ParallelEnv):
+        possible_agents = ["a"]
+
+    takes = r"fov_marl.integrations.torchrl.wrap takes a fov ParallelEnv \(fov_coverage_v0"
+    with pytest.raises(ValueError, match=rf"{takes}.*got the AEC env FovAECEnv"):
+        wrap(fov_coverage_v0.env(n_agents=2))
+    with pytest.raises(ValueError, match=r"takes one fov ParallelEnv.*vector env FovVectorEnv.*"):
+        wrap(fov_coverage_v0.vector_env(num_envs=2))
+    with pytest.raises(ValueError, match=rf"{takes}.*got 'x' \(str\)"):
+        wrap("x")
+    with pytest.raises(ValueError, match=r"needs a fov_marl ParallelEnv.*\(Foreign\)"):
+        wrap(Foreign())
+    with pytest.raises(ValueError, match=r"device must be a torch device.*got 'gpu0' \(str\)"):
+        wrap(fov_coverage_v0.parallel_env(n_agents=2), device="gpu0")
+    # a wrapper that changes the observations is fine here (TorchRL reads its spaces)
+    env = wrap(BeliefObservationWrapper(fov_coverage_v0.parallel_env(n_agents=2)), device=None)
+    assert env.group_map == {GROUP: ["robot_0", "robot_1"]}
