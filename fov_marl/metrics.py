@@ -62,6 +62,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fov_marl.config import ScenarioConfig
+from fov_marl.validation import check_int, check_real, describe
 
 __all__ = [
     "CoverageMetric",
@@ -1182,6 +1183,19 @@ def _starts(
     return [(nm, x + 1e-3 * R * jit.standard_normal(x.shape)) for nm, x in out]
 
 
+#: most random starts :func:`optimal_eta_solution` takes (each is one L-BFGS-B run)
+_MAX_RANDOM_STARTS = 1000
+
+
+def _check_eta_config(config: ScenarioConfig) -> None:
+    """``config`` must be a ScenarioConfig (the message says how to get one from an env)."""
+    if not isinstance(config, ScenarioConfig):
+        raise ValueError(
+            "config must be a ScenarioConfig (fov_marl.config.make_config(...), or "
+            f"env.unwrapped.config of an env), got {describe(config)}"
+        )
+
+
 def optimal_eta_solution(
     config: ScenarioConfig, n_random: int | None = None, seed: int = 0, tol: float = 1e-9
 ) -> OptimalEta:
@@ -1208,18 +1222,30 @@ def optimal_eta_solution(
     optimisation is skipped (``saturated``).
 
     Args:
-        config: uses ``n_agents``, ``arena_size_m``, ``sensing_radius_m``,
+        config: a :class:`~fov_marl.config.ScenarioConfig`; an env is refused, as by
+            every other function that takes a config (pass ``env.unwrapped.config``).
+            Uses ``n_agents``, ``arena_size_m``, ``sensing_radius_m``,
             ``density_mean_m``, ``density_sigma_m``, ``eta_grid_m``.
-        n_random: number of random starts (default 6, or 2 above 12 robots).
-        seed: seeds the random starts and the symmetry-breaking jitter.
-        tol: L-BFGS-B ``ftol``.
+        n_random: number of random starts, an integer in ``[0, 1000]`` (default 6, or 2
+            above 12 robots).
+        seed: an integer in ``[0, inf)``; seeds the random starts and the
+            symmetry-breaking jitter.
+        tol: L-BFGS-B ``ftol``, a real in ``[0, 1)``.
+
+    Raises:
+        ValueError: an argument of the wrong type or out of its range (the message
+            names it and the allowed range).
     """
     from scipy.optimize import minimize
 
+    _check_eta_config(config)
     n = int(config.n_agents)
     small = n <= _SMALL_TEAM
     if n_random is None:
         n_random = 6 if small else 2
+    n_random = check_int("n_random", n_random, 0, _MAX_RANDOM_STARTS, note="(or None)")
+    seed = check_int("seed", seed, 0)
+    tol = check_real("tol", tol, 0.0, 1.0, hi_open=True)
     R, L = float(config.sensing_radius_m), float(config.arena_size_m)
     q = np.asarray(config.density_mean_m, dtype=np.float64)
     metric = CoverageMetric(config)
@@ -1299,5 +1325,10 @@ def optimal_eta(config: ScenarioConfig) -> float:
     (``n_agents, arena_size_m, sensing_radius_m, density_mean_m, density_sigma_m,
     eta_grid_m``), so episodes and reports pay for it once per process (~1 s at N = 6,
     ~0.1 s for saturated large teams).
+
+    Raises:
+        ValueError: ``config`` is not a :class:`~fov_marl.config.ScenarioConfig` (an env
+            is refused too: pass ``env.unwrapped.config``).
     """
+    _check_eta_config(config)
     return _optimal_eta_cached(_optimal_eta_key(config)).eta

@@ -142,6 +142,7 @@ from fov_marl.validation import (
     MAX_SEED,
     check_int,
     check_keys,
+    check_out_path,
     check_writable,
     describe,
     keyword_parameters,
@@ -544,8 +545,8 @@ def run_stress(
 
     Raises:
         ValueError: a bad case or argument (naming it); a checkpoint that cannot be
-            read, holds a line that is not an episode, or was written by other code
-            (:func:`code_id`; naming the file and the line).
+            read or written (naming the path), holds a line that is not an episode, or
+            was written by other code (:func:`code_id`; naming the file and the line).
     """
     from fov_marl.backends import map_jobs
 
@@ -832,14 +833,18 @@ def _non_negative_int(flag: str, hi: int | None = None):
     return conv
 
 
+#: the largest team ScenarioConfig takes (its n_agents range is [1, 256])
+_MAX_AGENTS = 256
+
+
 def _n_agents(s: str) -> int:
     v = int(s)
-    if v < 1:
+    if not 1 <= v <= _MAX_AGENTS:
         raise ValueError(s)
     return v
 
 
-_n_agents.__name__ = "team size (integer >= 1)"
+_n_agents.__name__ = f"team size (integer in [1, {_MAX_AGENTS}])"
 
 
 def _fov(s: str) -> float:
@@ -885,7 +890,12 @@ def add_stress_parser(subparsers: Any) -> argparse.ArgumentParser:
         default=None,
         help=f"comma-separated, from {','.join(available_adversaries())}",
     )
-    p.add_argument("--n-agents", type=_csv(_n_agents), default=None, help="e.g. 2,4,8")
+    p.add_argument(
+        "--n-agents",
+        type=_csv(_n_agents),
+        default=None,
+        help=f"team sizes, comma-separated integers in [1, {_MAX_AGENTS}], e.g. 2,4,8",
+    )
     p.add_argument("--fov-deg", type=_csv(_fov), default=None, help="degrees, e.g. 45,120")
     p.add_argument(
         "--starts",
@@ -1087,8 +1097,9 @@ def cmd_stress(args: argparse.Namespace) -> int:
     from fov_marl.backends import check_backend, progress_bar
 
     check_backend(args.backend, args.ray_address)
-    if args.json is not None and not args.json.strip():
-        raise ValueError("--json must be a file path, got ''")
+    for flag, path in (("--json", args.json), ("--checkpoint", args.checkpoint)):
+        if path is not None:  # not a folder, not under a file: the shared output check
+            check_out_path(flag, path)
     cases = _cases_from_args(args)
     episodes = args.episodes if args.episodes is not None else (20 if args.full else 3)
     resumed = 0

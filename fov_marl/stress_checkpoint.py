@@ -25,7 +25,7 @@ import numpy as np
 from fov_marl.fingerprint import NOT_EPISODE, source_fingerprint
 from fov_marl.infos import SAFETY_CAUSES, SAFETY_STATUSES
 from fov_marl.jsonio import jsonable
-from fov_marl.validation import describe
+from fov_marl.validation import check_out_path, describe
 
 __all__ = ["CHECKPOINT_FORMAT", "code_id"]
 
@@ -274,10 +274,14 @@ def open_checkpoint(path: str | os.PathLike) -> tuple[dict[str, dict[str, Any]],
 
     Returns:
         ``({key: record}, text file opened for appending)``.
+
+    Raises:
+        ValueError: as :func:`read_checkpoint`, or a path that cannot be written (under
+            a file that is not a directory, in a read-only folder), naming it.
     """
     code_id()  # hashed now, before the sweep: not from files edited while it runs
     stored, keep, add_newline = read_checkpoint(path)
-    p = Path(path)
+    p = check_out_path("checkpoint", path)  # not under a file: the shared output check
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
         if p.exists() and p.stat().st_size > keep:

@@ -58,6 +58,7 @@ __all__ = [
     "check_writable",
     "MAX_SEED",
     "check_out_file",
+    "check_out_path",
     "check_params",
     "check_wrapper_kwargs",
 ]
@@ -544,7 +545,21 @@ def check_out_dir(name: str, value: str | os.PathLike) -> Path:
 def check_out_file(name: str, value: str | os.PathLike, suffixes: Sequence[str]) -> Path:
     """``value`` must be a writable output file path ending in one of ``suffixes``:
     not empty, not an existing directory, not under a non-directory. An existing file
-    is overwritten.
+    is overwritten. (:func:`check_out_path` with the suffix check.)
+
+    Returns:
+        ``Path(value)``.
+    """
+    return check_out_path(name, value, suffixes)
+
+
+def check_out_path(
+    name: str, value: str | os.PathLike, suffixes: Sequence[str] | None = None
+) -> Path:
+    """``value`` must be a writable output file path: not empty, not an existing
+    directory, not under a non-directory (the message names the component that is not a
+    directory), in a writable folder, and ending in one of ``suffixes`` unless that is
+    None (any name, e.g. a file that is appended to). Nothing is created here.
 
     Returns:
         ``Path(value)``.
@@ -558,7 +573,7 @@ def check_out_file(name: str, value: str | os.PathLike, suffixes: Sequence[str])
         raise ConfigError(f"{name} {text!r}: a path cannot contain a NUL byte")
     try:
         p = Path(text)
-        if p.suffix.lower() not in suffixes:
+        if suffixes is not None and p.suffix.lower() not in suffixes:
             raise ConfigError(f"{name} must end in {', '.join(suffixes)}, got {text!r}")
         if p.is_dir():
             raise ConfigError(f"{name} {text}: is a directory")

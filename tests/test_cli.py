@@ -335,7 +335,10 @@ def test_stress_json_seed_and_grid_lists_are_checked(tmp_path, capsys):
     (tmp_path / "file").write_text("")
     for argv, says in [
         (["stress", "--quick", "--json", ""], "--json must be a file path"),
-        (["stress", "--quick", "--json", str(tmp_path / "file" / "x.json")], "--json: cannot"),
+        (
+            ["stress", "--quick", "--json", str(tmp_path / "file" / "x.json")],
+            f"--json {tmp_path / 'file' / 'x.json'}: {tmp_path / 'file'} is not a directory",
+        ),
         (["stress", "--quick", "--seed", "2147483648"], "--seed must be an integer in"),
         (["stress", "--adversaries", "rush,rush", "--n-agents", "2"], "rush more than once"),
     ]:

@@ -460,7 +460,8 @@ SPECS: dict[str, dict[str, dict]] = {
             "either": ["1", "2"],
         },
         "--belief": {"bad": ["--belief=1"], "good": [None]},
-        "--belief-init": {"bad": ["x", "", "KNOWN"], "good": ["known", "uniform"]},
+        # only with --belief (alone: "add --belief"), like --filter-threads
+        "--belief-init": {"bad": ["x", "", "KNOWN"], "good": [], "either": ["known", "uniform"]},
         "--timesteps": {
             "bad": ["0", "-1", "abc", "", "1.5", "nan", "inf", "1e13", "1e400"],
             "good": ["8", "1e1", "12"],

@@ -742,3 +742,50 @@ def test_action_chatter_counts_alternation_not_reversal():
     np.testing.assert_array_equal(action_chatter(a), [0, 0, 3])
     with pytest.raises(ValueError, match="shape"):
         action_chatter(np.zeros((5, 3)))
+
+
+@pytest.mark.parametrize("fn", [optimal_eta, optimal_eta_solution])
+@pytest.mark.parametrize("bad", [None, {"n_agents": 2}, "coverage", 6])
+def test_optimal_eta_refuses_a_config_that_is_not_a_scenario_config(fn, bad):
+    with pytest.raises(ValueError, match=r"config must be a ScenarioConfig .*env\.unwrapped"):
+        fn(bad)
+
+
+@pytest.mark.parametrize("fn", [optimal_eta, optimal_eta_solution])
+def test_optimal_eta_refuses_an_env_and_says_to_pass_its_config(fn):
+    from fov_marl.envs import fov_coverage_v0
+
+    env = fov_coverage_v0.parallel_env()
+    with pytest.raises(ValueError, match=r"config must be a ScenarioConfig .*env\.unwrapped"):
+        fn(env)
+    fn(env.unwrapped.config)  # what the message says to pass works
+
+
+_BAD_ETA_ARGUMENTS = {
+    "n_random=-1": (
+        dict(n_random=-1),
+        r"n_random must be an integer in \[0, 1000\] \(or None\), got -1",
+    ),
+    "n_random=1e6": (dict(n_random=10**6), r"n_random must be an integer in \[0, 1000\]"),
+    "n_random=2.0": (dict(n_random=2.0), r"n_random must be an integer"),
+    "n_random=True": (dict(n_random=True), r"n_random must be an integer"),
+    "seed=-1": (dict(seed=-1), r"seed must be an integer in \[0, inf\), got -1"),
+    "seed=None": (dict(seed=None), r"seed must be an integer in \[0, inf\), got None"),
+    "seed=1.5": (dict(seed=1.5), r"seed must be an integer"),
+    "tol=-1": (dict(tol=-1), r"tol must be in \[0\.0, 1\.0\), got -1"),
+    "tol=1": (dict(tol=1.0), r"tol must be in \[0\.0, 1\.0\), got 1\.0"),
+    "tol=nan": (dict(tol=float("nan")), r"tol must be finite and in \[0\.0, 1\.0\)"),
+    "tol=str": (dict(tol="1e-9"), r"tol must be a real number in \[0\.0, 1\.0\)"),
+}
+
+
+@pytest.mark.parametrize("kw, match", _BAD_ETA_ARGUMENTS.values(), ids=_BAD_ETA_ARGUMENTS)
+def test_optimal_eta_solution_names_a_bad_argument_and_its_range(kw, match):
+    with pytest.raises(ValueError, match=match):
+        optimal_eta_solution(make_config(n_agents=1), **kw)
+
+
+def test_optimal_eta_solution_accepts_its_bounds():
+    cfg = make_config(n_agents=1, density_sigma_m=4.0)
+    sol = optimal_eta_solution(cfg, n_random=0, seed=np.int64(3), tol=0.0)
+    assert sol.eta == pytest.approx(optimal_eta(cfg), abs=1e-4)

@@ -10,6 +10,7 @@ import functools
 import json
 import math
 import os
+import re
 
 import pytest
 
@@ -315,3 +316,17 @@ def test_a_checkpoint_must_be_a_regular_file(tmp_path):
     for path in (fifo, tmp_path):
         with pytest.raises(ValueError, match="not a regular file"):
             run_stress(CASES, checkpoint=path, **KW)
+
+
+@pytest.mark.parametrize("depth", [(), ("sub",)])
+def test_a_checkpoint_under_a_file_says_it_is_not_a_directory(tmp_path, monkeypatch, depth):
+    """Red team: a checkpoint path under a regular file said "cannot write it (File
+    exists)"; the shared output check names the component that is no folder, before any
+    episode runs, and leaves the file as it is."""
+    calls = _counting(monkeypatch)
+    afile = tmp_path / "afile"
+    afile.write_text("keep")
+    path = afile.joinpath(*depth, "x.jsonl")
+    with pytest.raises(ValueError, match=f"^{re.escape(f'checkpoint {path}: {afile}')} is not a"):
+        run_stress(CASES[:1], checkpoint=path, **KW)
+    assert calls == [] and afile.read_text() == "keep"

@@ -106,3 +106,62 @@ def test_a_filtered_case_whose_camera_cannot_see_to_ds_is_refused():
     with pytest.raises(ValueError, match="detection_range_m must be above safety_distance_m"):
         StressCase("head_on", 8, 120.0, env_kwargs={"detection_range_m": 1.0})
     StressCase("head_on", 8, 120.0, filtered=False, env_kwargs={"detection_range_m": 1.0})
+
+
+# ------------------------------------------------------ the CLI names the flag and range
+def _cli_error(argv: list[str], capsys) -> str:
+    """``fov-marl stress ARGV`` must exit 2 with one error line, before any episode."""
+    from fov_marl.cli import main
+
+    try:
+        code = main(["stress", "--quiet", *argv])
+    except SystemExit as exc:  # argparse
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    return err
+
+
+@pytest.mark.parametrize("value", ["300", "257", "2,300", "0", "-1", "abc"])
+def test_cli_n_agents_out_of_range_names_the_flag_and_range(value, capsys, monkeypatch):
+    """Red team: ``--n-agents 300`` said "n_agents must be an integer in [1, 256]" without
+    naming --n-agents."""
+    import fov_marl.stress
+
+    monkeypatch.setattr(fov_marl.stress, "run_stress", None)  # no episode may start
+    err = _cli_error(["--n-agents", value], capsys)
+    assert "--n-agents" in err and "[1, 256]" in err, err
+
+
+def test_cli_help_gives_the_n_agents_range(capsys):
+    from fov_marl.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["stress", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "--n-agents N_AGENTS team sizes, comma-separated integers in [1, 256]" in help_text
+
+
+@pytest.mark.parametrize("flag, name", [("--json", "x.json"), ("--checkpoint", "x.jsonl")])
+@pytest.mark.parametrize("depth", [(), ("sub",)])
+def test_cli_output_under_a_file_says_it_is_not_a_directory(
+    flag, name, depth, tmp_path, capsys, monkeypatch
+):
+    """Red team: a PATH under a regular file said "cannot write PATH (File exists)"; the
+    shared output check (as ``evaluate --out``) names the component that is no folder."""
+    import fov_marl.stress
+
+    monkeypatch.setattr(fov_marl.stress, "run_stress", None)  # no episode may start
+    afile = tmp_path / "afile"
+    afile.write_text("keep")
+    path = afile.joinpath(*depth, name)
+    err = _cli_error([flag, str(path)], capsys)
+    assert err == f"fov-marl stress: error: {flag} {path}: {afile} is not a directory"
+    assert afile.read_text() == "keep"
+
+
+@pytest.mark.parametrize("flag", ["--json", "--checkpoint"])
+def test_cli_output_that_is_a_folder_is_refused_naming_the_flag(flag, tmp_path, capsys):
+    err = _cli_error([flag, str(tmp_path)], capsys)
+    assert err == f"fov-marl stress: error: {flag} {tmp_path}: is a directory"

@@ -132,8 +132,9 @@ def add_train_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--belief-init",
         choices=("known", "uniform"),
-        default="known",
-        help="belief trackers start at the known start poses (paper VII-B) or uniform",
+        default=None,
+        help="with --belief: the belief trackers start at the known start poses (paper "
+        "VII-B) or uniform (default: known)",
     )
     parser.add_argument(
         "--timesteps",
@@ -387,6 +388,8 @@ def run_train(args: argparse.Namespace) -> Path | int:
             f"--intervention-coef {args.intervention_coef} needs --safety-filter (it weighs "
             "the filter's action change; without the filter it would do nothing)"
         )
+    if args.belief_init is not None and not args.belief:
+        raise ValueError("--belief-init sets the belief trackers' start: add --belief")
     if args.arch == "set" and args.algo != "ppo":
         raise ValueError(f"--arch set needs --algo ppo, got --algo {args.algo}")
     if args.init_from is not None:
@@ -447,7 +450,7 @@ def run_train(args: argparse.Namespace) -> Path | int:
             safety_filter=args.safety_filter,
             safety_filter_kwargs=sf_kwargs,
             belief=args.belief,
-            belief_kwargs={"init": args.belief_init} if args.belief else None,
+            belief_kwargs={"init": args.belief_init or "known"} if args.belief else None,
             timesteps=args.timesteps,
             seed=args.seed,
             out_dir=out,
