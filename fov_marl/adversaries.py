@@ -79,7 +79,7 @@ import numpy as np
 
 from fov_marl.config import ScenarioConfig
 from fov_marl.geometry import body_to_world, world_to_body
-from fov_marl.validation import check_seed
+from fov_marl.validation import check_seed, has_attribute
 
 __all__ = [
     "Adversary",
@@ -109,7 +109,7 @@ class Adversary:
 
     def __init__(self, env: Any) -> None:
         base = env.unwrapped
-        if not hasattr(base, "config") or not hasattr(base, "poses"):
+        if not hasattr(base, "config") or not has_attribute(base, "poses"):
             raise ValueError(
                 "adversaries need a fov_marl environment (with .config and .poses), "
                 f"got {type(base).__name__}"

@@ -60,6 +60,7 @@ __all__ = [
     "check_out_file",
     "check_out_path",
     "check_params",
+    "has_attribute",
     "check_wrapper_kwargs",
 ]
 
@@ -391,6 +392,18 @@ def check_wrapper_kwargs(
     return dict(value)
 
 
+def has_attribute(obj: Any, name: str) -> bool:
+    """``hasattr`` that counts an attribute refusing to be read yet as present: a
+    property raising ``ValueError`` (an env's ``poses`` before ``reset()``) exists."""
+    try:
+        getattr(obj, name)
+    except AttributeError:
+        return False
+    except ValueError:
+        return True
+    return True
+
+
 def fov_parallel_base(name: str, env: Any, vector_hint: str = "") -> Any:
     """The fov_marl ParallelEnv under ``env`` (``env.unwrapped``), or a ``ValueError``.
 
@@ -415,7 +428,7 @@ def fov_parallel_base(name: str, env: Any, vector_hint: str = "") -> Any:
             f"fov_crossing_v0.parallel_env(...)), got the AEC env {type(env).__name__}; wrap "
             "the ParallelEnv and convert the wrapper (pettingzoo.utils.parallel_to_aec)"
         )
-    if base is None or not hasattr(base, "config") or not hasattr(base, "poses"):
+    if base is None or not hasattr(base, "config") or not has_attribute(base, "poses"):
         raise ValueError(
             f"{name} needs a fov_marl ParallelEnv (fov_coverage_v0.parallel_env(...) or "
             f"fov_crossing_v0.parallel_env(...), possibly wrapped), got {describe(env)}"

@@ -273,23 +273,34 @@ class FovEnvBase(ParallelEnv):
         return out
 
     # ----------------------------------------------------------------- state
+    def _check_was_reset(self, what: str) -> None:
+        """Before the first ``reset()`` there are no poses: reading them is an error."""
+        if not self._was_reset:
+            raise ValueError(f"{what} before reset(): the env has no poses yet")
+
     def state(self) -> np.ndarray:
-        """Global state for centralised critics (see the module docstring)."""
+        """Global state for centralised critics (see the module docstring); ``ValueError``
+        before the first ``reset()``."""
+        self._check_was_reset("state() called")
         return self._core.state()[0]
 
     @property
     def poses(self) -> np.ndarray:
-        """``(N, 3)`` ground-truth world poses ``[x m, y m, yaw rad]`` (read-only copy).
+        """``(N, 3)`` ground-truth world poses ``[x m, y m, yaw rad]`` (read-only copy);
+        ``ValueError`` before the first ``reset()``.
 
         For evaluation and rendering only; never an input to a decentralised policy.
         """
+        self._check_was_reset("poses read")
         p = self._poses.copy()
         p.setflags(write=False)
         return p
 
     @property
     def targets(self) -> np.ndarray | None:
-        """``(N, 2)`` crossing targets in the world frame (read-only copy), else None."""
+        """``(N, 2)`` crossing targets in the world frame (read-only copy), else None;
+        ``ValueError`` before the first ``reset()``."""
+        self._check_was_reset("targets read")
         if self._targets is None:
             return None
         t = self._targets.copy()
@@ -310,6 +321,7 @@ class FovEnvBase(ParallelEnv):
         if self.render_mode is None:
             gymnasium.logger.warn("render() called with render_mode=None; nothing is drawn")
             return None
+        self._check_was_reset("render() called")
         caption = f"t = {self.num_steps * self.config.dt_s:6.1f} s"
         frame = render_frame(self.config, self._poses, self._targets, self._layers, caption=caption)
         if self.render_mode == "rgb_array":

@@ -236,6 +236,7 @@ class FovVectorEnv:
         self._all = np.arange(B)
         self._needs_reset = True
         self._not_ready = "step() called before reset(); call reset() first"
+        self._ever_reset = False  # poses, targets and state() exist after a reset()
         self.closed = False
 
     @classmethod
@@ -267,6 +268,7 @@ class FovVectorEnv:
             raise ValueError(f"options must be a dict or None, got {describe(options)}")
         self._needs_reset = True  # until every copy has reset
         self._not_ready = "the last reset() failed; call reset() again"
+        self._ever_reset = True  # a failed reset leaves readable (partial) poses
         obs, metrics = self._core.reset(self._all, seeds)
         self._needs_reset = False
         return obs, {"metrics": metrics}
@@ -316,16 +318,24 @@ class FovVectorEnv:
             raise ValueError("the vector env is closed")
 
     # ------------------------------------------------------------- ground truth
+    def _check_ever_reset(self, what: str) -> None:
+        if not self._ever_reset:
+            raise ValueError(f"{what} before reset(): the vector env has no poses yet")
+
     @property
     def poses(self) -> np.ndarray:
-        """``(B, N, 3)`` ground-truth world poses ``[x m, y m, yaw rad]`` (read-only copy)."""
+        """``(B, N, 3)`` ground-truth world poses ``[x m, y m, yaw rad]`` (read-only copy);
+        ``ValueError`` before the first ``reset()``."""
+        self._check_ever_reset("poses read")
         p = self._core.poses.copy()
         p.setflags(write=False)
         return p
 
     @property
     def targets(self) -> np.ndarray | None:
-        """``(B, N, 2)`` crossing targets in the world frame (read-only copy), else None."""
+        """``(B, N, 2)`` crossing targets in the world frame (read-only copy), else None;
+        ``ValueError`` before the first ``reset()``."""
+        self._check_ever_reset("targets read")
         t = self._core.targets
         if t is None:
             return None
@@ -339,7 +349,9 @@ class FovVectorEnv:
         return self._core.num_steps.copy()
 
     def state(self) -> np.ndarray:
-        """``(B, S)`` float32 global states (each row as the ParallelEnv's ``state()``)."""
+        """``(B, S)`` float32 global states (each row as the ParallelEnv's ``state()``);
+        ``ValueError`` before the first ``reset()``."""
+        self._check_ever_reset("state() called")
         return self._core.state()
 
     # ------------------------------------------------------------ attributes

@@ -60,7 +60,7 @@ from fov_marl.envs.vector import check_vector_actions, vector_seeds
 from fov_marl.estimation import TrackerParams
 from fov_marl.pipeline import PfCbfPipeline
 from fov_marl.spaces import action_to_velocity
-from fov_marl.validation import check_params
+from fov_marl.validation import check_params, has_attribute
 from fov_marl.wrappers.safety_filter import (
     FILTER_TRACKER_DEFAULTS,
     SafetyFilterWrapper,
@@ -103,7 +103,7 @@ class VectorSafetyFilterWrapper:
         tracker_threads: int = 1,
     ) -> None:
         for attr in ("num_envs", "config", "reset", "step", "poses"):
-            if not hasattr(venv, attr):
+            if not has_attribute(venv, attr):
                 raise ValueError(
                     "VectorSafetyFilterWrapper needs a fov_marl vector env (num_envs, config, "
                     f"poses, reset, step); {type(venv).__name__} has no {attr!r}"

@@ -139,6 +139,27 @@ def test_max_cycles_set_on_a_wrapper_or_the_aec_env_truncates(mod):
 
 
 @pytest.mark.parametrize("mod", MODULES, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
+def test_ground_truth_before_reset_is_an_error(mod):
+    """Red team 26: before reset() state(), poses and an rgb_array render() gave every
+    robot the pose (0, 0, 0), overlapping outside the arena; the vector env too."""
+    from fov_marl.wrappers import SafetyFilterWrapper
+
+    env = mod.parallel_env(n_agents=2, render_mode="rgb_array")
+    venv = mod.vector_env(num_envs=2, n_agents=2)
+    for e in (env, SafetyFilterWrapper(mod.parallel_env(n_agents=2)), venv):
+        for read in (lambda e: e.state(), lambda e: e.poses, lambda e: e.targets):
+            with pytest.raises(ValueError, match=r"before reset\(\)"):
+                read(e)
+    with pytest.raises(ValueError, match=r"render\(\) called before reset\(\)"):
+        env.render()
+    env.reset(seed=0)
+    venv.reset(seed=0)
+    assert env.poses.shape == (2, 3) and venv.poses.shape == (2, 2, 3)
+    assert env.render().ndim == 3 and env.state().shape == venv.state()[0].shape
+    np.testing.assert_array_equal(env.state(), venv.state()[0])
+
+
+@pytest.mark.parametrize("mod", MODULES, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
 def test_step_messages_say_before_reset_or_finished(mod):
     from fov_marl.wrappers import SafetyFilterWrapper
 
