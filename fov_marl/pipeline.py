@@ -708,6 +708,7 @@ class PfCbfPipeline:
         else:
             last = age = None
             mean, cov, det, parts = np.zeros((R, 0, 2)), np.zeros((R, 0, 2, 2)), None, None
+        no_budget = self.estimates == "oracle" or self.n <= 1
         return team_safety_rows(
             cfg,
             par,
@@ -721,9 +722,10 @@ class PfCbfPipeline:
             fov_rad=2.0 * math.pi if self.estimates == "oracle" else cfg.fov_rad,
             last_seen_body=last,
             last_seen_age_s=age,
-            blind_travel_body=None if self.estimates == "oracle" else self._blind_travel_body(),
+            # no budget for the oracle, nor for a one-robot team (no neighbour to meet blind)
+            blind_travel_body=None if no_budget else self._blind_travel_body(),
             particle_counts=None if parts is None else e["counts"],
-            bearing_travel_m=None if self.estimates == "oracle" else self._bearing_spent(),
+            bearing_travel_m=None if no_budget else self._bearing_spent(),
             detection_body=self._detection_body if self.estimates == "tracker" else None,
         )
 

@@ -1687,8 +1687,8 @@ def safety_rows(
             neighbours' last-seen points in Σ_i (NaN: never seen) and their ages, or
             None (no last-seen rows; :func:`last_seen_rows`).
         blind_travel_body: ``(R, 2)`` the blind travel ``e`` in Σ_i (m), or None (no
-            budget row; Section 2d). blind_travel_m: the budget B (m); 0: no row. A
-            one-robot team (M = 0) gets no budget rows: no neighbour can be met blind.
+            budget row; Section 2d). blind_travel_m: the budget B (m); 0: no row. (The
+            pipeline passes None for a one-robot team: no neighbour can be met blind.)
         bearing_travel_m, bearing_travel_yaw_rad: ``(R, K_b)`` the approach per budget
             bearing (m) and ``(R,)`` the robots' yaw, or None (no per-bearing rows;
             Section 2e, :func:`bearing_travel_rows`); the budget is ``blind_travel_m``.
@@ -1853,7 +1853,7 @@ def safety_rows(
         )
         add(_approach_only_rows(n_c, h_c, ROW_LAST_SEEN, safety_distance_m, m_arc, gain))
 
-    if blind_travel_body is not None and blind_travel_m > 0.0 and M:
+    if blind_travel_body is not None and blind_travel_m > 0.0:
         e = np.asarray(blind_travel_body, dtype=np.float64)
         r = np.hypot(e[:, 0], e[:, 1])
         on = r > 1e-6
@@ -1879,7 +1879,7 @@ def safety_rows(
             blocks_k.append(np.where(np.isfinite(b), ROW_BUDGET, -1).astype(np.int8))
             blocks_h.append(h)
 
-    if bearing_travel_m is not None and blind_travel_m > 0.0 and M:
+    if bearing_travel_m is not None and blind_travel_m > 0.0:
         if bearing_travel_yaw_rad is None:
             raise ValueError("bearing_travel_m needs bearing_travel_yaw_rad (the robots' yaw)")
         A, b, h = bearing_travel_rows(
