@@ -400,7 +400,13 @@ def run_episode(
     if scenario == "coverage" and eta_series:
         eta_opt = optimal_eta(cfg)
         eta_norm = eta_series[-1] / eta_opt if eta_opt > 0 else None
-        t_norm = time_to_eta(eta_series, dt, min(ETA_NORM_THRESHOLD * eta_opt, 1.0))
+        # η_opt = 0 (sensing disks that cover no grid cell: eta_grid_m coarser than R_s):
+        # no threshold to reach, like eta_normalised
+        t_norm = (
+            time_to_eta(eta_series, dt, min(ETA_NORM_THRESHOLD * eta_opt, 1.0))
+            if eta_opt > 0
+            else None
+        )
     arrived_any = ~np.isnan(first_arrival)
     return EpisodeRecord(
         max_distance_m=math.sqrt(2.0) * (cfg.arena_size_m - 2.0 * cfg.robot_radius_m),

@@ -112,6 +112,18 @@ def test_valid_arguments_run_as_before():
 
 
 # ----------------------------------------------------------------- F20: one robot, inf
+def test_a_config_whose_optimal_eta_is_zero_runs_and_reports_no_threshold():
+    """Red team 29: sensing disks of 0.05 m on a 0.63 m eta grid cover no cell, so the
+    optimal η is 0 and run_episode raised time_to_eta's "threshold must be in (0, 1]"
+    (a valid config). The normalised fields are None, as eta_normalised already was."""
+    rec = run_episode(
+        "coverage", "random", 0, n_agents=2, max_steps=3, sensing_radius_m=0.05,
+        density_sigma_m=1e6, eta_grid_m=0.63,
+    )  # fmt: skip
+    assert rec.eta_optimal == 0.0 and rec.final_eta == 0.0
+    assert rec.eta_normalised is None and rec.time_to_eta_norm_s is None
+
+
 def test_one_robot_summaries_have_no_nan_or_inf():
     """F20: min_distance inf gave mean inf, std nan, ci95 [nan, nan]."""
     r = run_episode("coverage", "random", 0, n_agents=1, max_steps=3)
