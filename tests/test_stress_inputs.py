@@ -111,16 +111,9 @@ def test_a_filtered_case_whose_camera_cannot_see_to_ds_is_refused():
 # ------------------------------------------------------ the CLI names the flag and range
 def _cli_error(argv: list[str], capsys) -> str:
     """``fov-marl stress ARGV`` must exit 2 with one error line, before any episode."""
-    from fov_marl.cli import main
+    from test_cli import _error_line  # one exit-2, one-line check for every CLI test
 
-    try:
-        code = main(["stress", "--quiet", *argv])
-    except SystemExit as exc:  # argparse
-        code = exc.code
-    assert code == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
-    return err
+    return _error_line(["stress", "--quiet", *argv], capsys)
 
 
 @pytest.mark.parametrize("value", ["300", "257", "2,300", "0", "-1", "abc"])
