@@ -708,7 +708,7 @@ class PfCbfPipeline:
         else:
             last = age = None
             mean, cov, det, parts = np.zeros((R, 0, 2)), np.zeros((R, 0, 2, 2)), None, None
-        no_budget = self.estimates == "oracle" or self.n <= 1
+        no_budget = not self._budget_on()
         return team_safety_rows(
             cfg,
             par,
@@ -794,6 +794,17 @@ class PfCbfPipeline:
             return None
         return ~np.asarray(det, dtype=bool) & (np.asarray(age) >= p.lost_fov_age_s)
 
+    def _budget_on(self) -> bool:
+        """Whether the blind travel budget applies (its rows and the look before the
+        leap): the CBF on the particle filters' estimates (not the oracle), a budget
+        B > 0, and a neighbour to meet blind (not a one-robot team)."""
+        return (
+            self.use_cbf
+            and self.estimates == "tracker"
+            and self.controller_params.blind_travel_m > 0.0
+            and self.n > 1
+        )
+
     def _look_before_leap(self, u_star: np.ndarray) -> np.ndarray:
         """Turn a robot that has spent most of its blind travel budget towards it.
 
@@ -810,9 +821,7 @@ class PfCbfPipeline:
         (and for the oracle, or with the budget disabled).
         """
         par = self.controller_params
-        if not self.use_cbf or self.estimates != "tracker" or par.blind_travel_m <= 0.0:
-            return u_star
-        if self.n <= 1:  # a one-robot team: no neighbour to meet blind, no budget rows
+        if not self._budget_on():
             return u_star
         trigger = par.look_fraction * par.blind_travel_m - _LOOK_SLACK_M
         if par.look_persistence_deg > 0.0:
